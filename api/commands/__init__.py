@@ -1,0 +1,1 @@
+"""Subcommands of ``demcal``; each module has a ``register(app)`` function."""

@@ -1,0 +1,81 @@
+"""Fixtures for real services: a fresh PostgreSQL database per test session and a dedicated,
+flushed Redis database.
+
+With ``CI=true`` a missing service fails the test; elsewhere it skips with a reason that says how
+to provide it (``DEMCAL_TEST_DATABASE_URL`` / ``DEMCAL_TEST_REDIS_URL``).
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+
+import pytest
+
+DEFAULT_TEST_DATABASE_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
+DEFAULT_TEST_REDIS_URL = "redis://127.0.0.1:6379/13"
+
+
+def _in_ci() -> bool:
+    return os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+
+def _unavailable(service: str, variable: str, exc: Exception) -> None:
+    message = (
+        f"{service} is not reachable ({exc.__class__.__name__}: {exc}); start it or point "
+        f"{variable} at one"
+    )
+    if _in_ci():
+        pytest.fail(f"CI=true requires {service}: {message}")
+    pytest.skip(message)
+
+
+@pytest.fixture(scope="session")
+def postgres_url():
+    """URL of a database created for this test session and dropped afterwards."""
+    import sqlalchemy as sa
+
+    base_url = sa.make_url(os.environ.get("DEMCAL_TEST_DATABASE_URL", DEFAULT_TEST_DATABASE_URL))
+    if base_url.drivername == "postgresql":
+        base_url = base_url.set(drivername="postgresql+psycopg")
+    admin = sa.create_engine(base_url, isolation_level="AUTOCOMMIT", connect_args={"connect_timeout": 5})
+    name = f"demcal_test_{uuid.uuid4().hex[:12]}"
+    try:
+        with admin.connect() as conn:
+            conn.execute(sa.text(f'CREATE DATABASE "{name}"'))
+    except Exception as exc:  # noqa: BLE001 - any connection failure means "no server"
+        admin.dispose()
+        _unavailable("PostgreSQL", "DEMCAL_TEST_DATABASE_URL", exc)
+    try:
+        yield base_url.set(database=name).render_as_string(hide_password=False)
+    finally:
+        with admin.connect() as conn:
+            conn.execute(sa.text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.dispose()
+
+
+@pytest.fixture(scope="session")
+def redis_server_url():
+    """URL of the dedicated Redis database for tests (session scope, reachable)."""
+    import redis
+
+    url = os.environ.get("DEMCAL_TEST_REDIS_URL", DEFAULT_TEST_REDIS_URL)
+    try:
+        client = redis.Redis.from_url(url, socket_connect_timeout=5)
+        client.ping()
+        client.close()
+    except Exception as exc:  # noqa: BLE001
+        _unavailable("Redis", "DEMCAL_TEST_REDIS_URL", exc)
+    return url
+
+
+@pytest.fixture
+def redis_url(redis_server_url):
+    """The dedicated Redis database, flushed before and after the test."""
+    import redis
+
+    client = redis.Redis.from_url(redis_server_url)
+    client.flushdb()
+    yield redis_server_url
+    client.flushdb()
+    client.close()
