@@ -17,6 +17,7 @@ from api.settings import SettingsError, get_settings
 
 COMMAND_MODULES = (
     "api.commands.config",
+    "api.commands.worker",
 )
 
 app = typer.Typer(

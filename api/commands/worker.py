@@ -1,0 +1,48 @@
+"""``demcal worker``: run DEM trials from the Redis queue, on this machine, until stopped.
+
+Start as many as the machine has cores to spare (each runs one simulation at a time, on one
+core). Workers need only ``DEMCAL_REDIS_URL``; they never open the database.
+"""
+
+from __future__ import annotations
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("worker")
+    def worker(
+        queues: list[str] = typer.Option(
+            None,
+            "--queues",
+            "-q",
+            help="Queues to take trials from, highest priority first (default: DEMCAL_QUEUE_NAME).",
+        ),
+        burst: bool = typer.Option(False, "--burst", help="Exit when the queues are empty."),
+        name: str = typer.Option(None, "--name", help="Worker name (default: host.pid.tag)."),
+        heartbeat: int = typer.Option(
+            10,
+            "--heartbeat",
+            min=1,
+            max=300,
+            help="Seconds between heartbeats while a trial runs; a worker silent for 3 heartbeats "
+            "is presumed dead and its trial runs again elsewhere.",
+        ),
+    ) -> None:
+        """Run trials from the queue. SIGTERM finishes the current trial, then exits."""
+        from api.settings import get_settings
+        from worker.runner import WorkerSetupError, run_worker
+
+        settings = get_settings()
+        try:
+            run_worker(
+                settings.redis_url,
+                queues or [settings.queue_name],
+                burst=burst,
+                name=name,
+                heartbeat_s=heartbeat,
+                log_level=settings.log_level,
+            )
+        except WorkerSetupError as exc:
+            typer.secho(f"error: {exc}", err=True, fg="red")
+            raise typer.Exit(2) from None

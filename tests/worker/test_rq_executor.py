@@ -1,0 +1,251 @@
+"""The RQ executor against a real Redis and a real (forking, burst-mode) RQ worker.
+
+The job run here is a stand-in for the simulation (``stand_in_trial``: its scenario says whether
+it returns a result or raises), because what is under test is the queue path: enqueueing,
+exactly-once results, retries of infrastructure failures only, reconciliation snapshots. The real
+simulation through this path is covered in ``tests/e2e/``.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import redis
+from rq import get_current_job
+from rq.job import Job
+from rq.serializers import JSONSerializer
+
+from dem.result import SimulationResult, SimulationStatus
+from optimizer.protocols import TrialSpec, trial_id
+from worker.rq_executor import (
+    MAX_JOB_TIMEOUT_S,
+    MIN_JOB_TIMEOUT_S,
+    RedisQueueError,
+    RqExecutor,
+    estimated_time_step,
+    job_timeout,
+)
+from worker.rq_job import deliver, results_key
+from worker.runner import build_worker
+
+pytestmark = pytest.mark.redis
+
+QUEUE = "demcal-test"
+
+
+def stand_in_trial(spec: dict) -> dict:
+    """A job that does what the scenario's ``behaviour`` says, through the real delivery path."""
+    behaviour = spec["scenario"].get("behaviour", "ok")
+    if behaviour == "raise":
+        raise OSError("scratch disk full")
+    result = SimulationResult(
+        status=SimulationStatus(behaviour),
+        n_items=3,
+        n_remaining=spec["individual"] % 4,
+        params=spec["params"],
+        seed=spec["seed"],
+    ).model_dump(mode="json")
+    deliver(get_current_job(), spec, result)
+    return result
+
+
+JOB_FUNCTION = f"{__name__}.stand_in_trial"
+
+
+def make_spec(study: str, individual: int, behaviour: str = "ok", **overrides) -> TrialSpec:
+    fields = dict(
+        trial_id=trial_id(study, individual, 0),
+        study_id=study,
+        individual=individual,
+        generation=0,
+        replicate=0,
+        seed=1000 + individual,
+        params={"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.4},
+        scenario={"behaviour": behaviour},
+    )
+    fields.update(overrides)
+    return TrialSpec(**fields)
+
+
+@pytest.fixture
+def connection(redis_url):
+    client = redis.Redis.from_url(redis_url)
+    yield client
+    client.close()
+
+
+@pytest.fixture
+def executor(connection):
+    return RqExecutor(connection, QUEUE, job_function=JOB_FUNCTION)
+
+
+def run_worker_until_empty(connection) -> None:
+    build_worker(connection, [QUEUE], heartbeat_s=2).work(burst=True, logging_level="WARNING")
+
+
+def test_a_generation_is_enqueued_with_trial_ids_as_job_ids(executor, connection):
+    specs = [make_spec("s1", i) for i in range(5)]
+
+    executor.submit(specs)
+
+    assert executor.queue.job_ids == [spec.trial_id for spec in specs]
+    job = Job.fetch(specs[0].trial_id, connection=connection, serializer=JSONSerializer)
+    assert job.args[0]["scenario"] == {"behaviour": "ok"}
+    assert job.timeout >= MIN_JOB_TIMEOUT_S
+    assert job.retries_left == 2
+
+
+def test_submitting_a_trial_already_queued_is_a_no_op(executor):
+    specs = [make_spec("s1", i) for i in range(3)]
+    executor.submit(specs)
+
+    executor.submit(specs + [make_spec("s1", 3)])
+
+    assert executor.queue.count == 4
+
+
+def test_every_result_is_taken_exactly_once(executor, connection):
+    specs = [make_spec("s1", i) for i in range(4)]
+    executor.submit(specs)
+    run_worker_until_empty(connection)
+
+    first = executor.poll(timeout=1.0)
+    second = executor.poll()
+
+    assert sorted(outcome.trial_id for outcome in first) == [spec.trial_id for spec in specs]
+    assert all(outcome.worker for outcome in first)
+    assert [outcome.result.n_remaining for outcome in sorted(first, key=lambda o: o.trial_id)] == [0, 1, 2, 3]
+    assert second == []
+
+
+def test_a_late_duplicate_result_is_dropped(executor, connection):
+    spec = make_spec("s1", 0)
+    executor.submit([spec])
+    run_worker_until_empty(connection)
+    executor.poll(timeout=1.0)
+    duplicate = {"trial_id": spec.trial_id, "study_id": "s1", "worker": "w", "result": {"status": "ok"}}
+    connection.rpush(results_key(QUEUE, "s1"), json.dumps(duplicate))
+
+    outcomes = executor.poll()
+
+    assert outcomes == []
+
+
+def test_services_take_only_the_results_of_studies_they_watch(connection):
+    mine = RqExecutor(connection, QUEUE, job_function=JOB_FUNCTION)
+    theirs = RqExecutor(connection, QUEUE, job_function=JOB_FUNCTION)
+    mine.submit([make_spec("mine", 0)])
+    theirs.submit([make_spec("theirs", 0)])
+    run_worker_until_empty(connection)
+
+    taken_by_mine = mine.poll(timeout=1.0)
+    taken_by_theirs = theirs.poll(timeout=1.0)
+
+    assert [outcome.trial_id for outcome in taken_by_mine] == [trial_id("mine", 0, 0)]
+    assert [outcome.trial_id for outcome in taken_by_theirs] == [trial_id("theirs", 0, 0)]
+
+
+def test_an_unstable_simulation_is_a_result_and_is_not_retried(executor, connection):
+    spec = make_spec("s1", 0, behaviour="unstable")
+    executor.submit([spec])
+
+    run_worker_until_empty(connection)
+    outcomes = executor.poll(timeout=1.0)
+
+    assert [outcome.result.status for outcome in outcomes] == [SimulationStatus.UNSTABLE]
+    job = Job.fetch(spec.trial_id, connection=connection, serializer=JSONSerializer)
+    assert len(job.results()) == 1
+
+
+def test_a_job_that_keeps_failing_is_retried_then_reported_as_an_error(executor, connection):
+    spec = make_spec("s1", 0, behaviour="raise")
+    executor.submit([spec])
+
+    run_worker_until_empty(connection)
+    outcomes = executor.poll()
+
+    assert len(outcomes) == 1
+    result = outcomes[0].result
+    assert result.status is SimulationStatus.ERROR
+    assert "failed 3 time(s)" in result.message
+    assert "scratch disk full" in result.message
+    assert result.seed == spec.seed
+    assert executor.poll() == []
+
+
+def test_a_failed_trial_submitted_again_runs_again(executor, connection):
+    failing = make_spec("s1", 0, behaviour="raise")
+    executor.submit([failing])
+    run_worker_until_empty(connection)
+    executor.poll()
+
+    executor.submit([make_spec("s1", 0, behaviour="ok")])
+    run_worker_until_empty(connection)
+    outcomes = executor.poll(timeout=1.0)
+
+    assert [outcome.result.status for outcome in outcomes] == [SimulationStatus.OK]
+
+
+def test_in_flight_holds_queued_trials_and_untaken_results_and_nothing_after_a_flush(executor, connection):
+    executor.submit([make_spec("s1", i) for i in range(2)])
+    run_worker_until_empty(connection)
+    executor.submit([make_spec("s1", 2)])
+
+    before_flush = executor.in_flight()
+    connection.flushdb()  # stands for FLUSHALL on a shared Redis
+    after_flush = executor.in_flight()
+
+    assert before_flush == {trial_id("s1", i, 0) for i in range(3)}
+    assert after_flush == set()
+
+
+def test_a_trial_lost_in_a_flush_can_be_submitted_again(executor, connection):
+    spec = make_spec("s1", 0)
+    executor.submit([spec])
+    connection.flushdb()
+
+    executor.submit([spec])
+    run_worker_until_empty(connection)
+
+    assert [outcome.trial_id for outcome in executor.poll(timeout=1.0)] == [spec.trial_id]
+
+
+def test_cancelled_trials_leave_the_queue_and_are_never_reported(executor, connection):
+    specs = [make_spec("s1", i) for i in range(3)]
+    executor.submit(specs)
+
+    executor.cancel([specs[0].trial_id])
+    run_worker_until_empty(connection)
+
+    assert sorted(o.trial_id for o in executor.poll(timeout=1.0)) == [s.trial_id for s in specs[1:]]
+
+
+def test_an_unreachable_redis_is_an_error_naming_the_url():
+    with pytest.raises(RedisQueueError, match="127.0.0.1:1/0"):
+        RqExecutor.from_url("redis://127.0.0.1:1/0")
+
+
+def test_job_timeout_is_the_deadline_with_a_margin_when_the_spec_has_one():
+    spec = make_spec("s1", 0, timeout_s=3600.0)
+
+    assert job_timeout(spec) > 3600
+
+
+def test_job_timeout_grows_with_simulated_time_and_has_a_floor_and_a_ceiling():
+    def scenario(seconds: float) -> dict:
+        return {"stages": {"vibration_start": 1.0, "vibration_time": seconds}, "items": {"counts": {"a": 30}}}
+
+    short = job_timeout(make_spec("s", 0, scenario=scenario(0.1)))
+    paper = job_timeout(make_spec("s", 0, scenario=scenario(60.0)))
+    huge = job_timeout(make_spec("s", 0, scenario=scenario(1e7)))
+
+    assert short == MIN_JOB_TIMEOUT_S
+    assert short < paper < huge == MAX_JOB_TIMEOUT_S
+
+
+def test_estimated_time_step_scales_as_one_over_root_e():
+    soft = estimated_time_step({}, {"E": 1e6})
+    stiff = estimated_time_step({}, {"E": 4e6})
+
+    assert stiff == pytest.approx(soft / 2)

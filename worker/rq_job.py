@@ -1,0 +1,99 @@
+"""What an RQ worker runs for one trial, and the Redis list through which the result travels back.
+
+The job's only argument is the whole ``TrialSpec`` as a JSON-able dict (scenario, parameters,
+seed), so a worker needs Redis and nothing else: no database, no shared disk. The simulation
+itself is ``worker.jobs.run_trial``; this module wraps it for RQ:
+
+* a simulation that ends ``unstable``, ``timeout`` or ``error`` is a *result* like ``ok``: it is
+  delivered and the job succeeds, so RQ never retries physics;
+* only an exception escaping ``run_trial`` (a lost connection, memory exhausted, a bug) fails the
+  job, and RQ retries it the bounded number of times the executor asked for;
+* the result is pushed onto the study's result list (``results_key``); the service's
+  ``RqExecutor`` pops it, and a pop is atomic, so each pushed result is taken exactly once. A
+  trial that ran twice (a worker presumed dead that was only slow) pushes twice; the store keeps
+  the first and ignores the second.
+
+Must not: open the database, import ``api``, or decide anything about a study.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from typing import Any
+
+from rq import get_current_job
+from rq.job import Job
+
+logger = logging.getLogger(__name__)
+
+# A result list nobody pops (its study was deleted while trials ran) must not stay in Redis for
+# ever; a week is far longer than any service outage we expect to ride out.
+RESULT_LIST_TTL_S = 7 * 24 * 3600
+
+
+def results_key(queue_name: str, study_id: str) -> str:
+    """The Redis list holding finished results of one study's trials on one queue."""
+    return f"demcal:results:{queue_name}:{study_id}"
+
+
+def worker_name() -> str | None:
+    """The RQ worker running this process (RQ sets it in the work horse's environment)."""
+    return os.environ.get("RQ_WORKER_ID")
+
+
+def deliver(job: Job, spec: dict[str, Any], result: dict[str, Any]) -> None:
+    """Push one finished trial's result where the executor will take it."""
+    envelope = json.dumps(
+        {
+            "trial_id": spec["trial_id"],
+            "study_id": spec["study_id"],
+            "worker": worker_name(),
+            "result": result,
+        }
+    )
+    key = results_key(job.origin, spec["study_id"])
+    with job.connection.pipeline() as pipe:
+        pipe.rpush(key, envelope)
+        pipe.expire(key, RESULT_LIST_TTL_S)
+        pipe.execute()
+
+
+def attempt(job: Job) -> int:
+    """1 for the first run of a job, 2 for its first retry, and so on."""
+    retries = int(job.meta.get("max_retries", 0))
+    left = job.retries_left if job.retries_left is not None else retries
+    return retries - left + 1
+
+
+def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
+    """Run one trial on this worker and deliver its result; returns the SimulationResult JSON."""
+    from worker.jobs import run_trial
+
+    job = get_current_job()
+    if job is None:
+        raise RuntimeError("perform_trial runs inside an RQ job; call worker.jobs.run_trial directly")
+    params = ", ".join(f"{name}={value:.4g}" for name, value in spec["params"].items())
+    logger.info(
+        "trial %s: started (generation %s, %s, seed %s, attempt %d)",
+        spec["trial_id"],
+        spec.get("generation"),
+        params,
+        spec["seed"],
+        attempt(job),
+    )
+    started = time.perf_counter()
+    result = run_trial(spec)
+    deliver(job, spec, result)
+    logger.info(
+        "trial %s: %s, N_t=%s of %s, %.1f s wall%s",
+        spec["trial_id"],
+        result.get("status"),
+        result.get("n_remaining"),
+        result.get("n_items"),
+        time.perf_counter() - started,
+        f" ({result['message']})" if result.get("message") else "",
+    )
+    return result
