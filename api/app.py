@@ -1,0 +1,96 @@
+"""The FastAPI application: ``create_app(settings)`` composes the store, the routers, the error
+handlers and the request-size limit. ``/`` and ``/static`` are left free for the dashboard.
+
+It refuses to start on a database whose schema is not at the newest migration
+(``SchemaOutOfDateError`` says to run ``demcal db upgrade``); it never migrates by itself, because
+a service with several replicas must not race to alter its schema.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import sqlalchemy as sa
+from fastapi import FastAPI
+from fastapi.responses import JSONResponse
+
+from api import __version__
+from api.db import check_schema_current, create_db_engine
+from api.errors import PayloadTooLargeError, install_error_handlers
+from api.routes import health, metrics, shapes, simulations, studies, trials
+from api.settings import Settings
+from api.store import SqlStore
+
+log = logging.getLogger(__name__)
+
+UPLOAD_PATH = "/api/v1/shapes"
+MULTIPART_OVERHEAD = 64 * 1024  # form fields and boundaries around the mesh file
+
+
+class BodySizeLimit:
+    """Refuse request bodies above the configured size with 413, before they are read whole.
+
+    A declared Content-Length is checked up front; a chunked body is counted as it arrives.
+    Mesh uploads get the upload limit, every other request the JSON limit.
+    """
+
+    def __init__(self, app, max_request_bytes: int, max_upload_bytes: int):
+        self.app = app
+        self.max_request_bytes = max_request_bytes
+        self.max_upload_bytes = max_upload_bytes + MULTIPART_OVERHEAD
+
+    def _limit(self, path: str) -> int:
+        return self.max_upload_bytes if path.rstrip("/") == UPLOAD_PATH else self.max_request_bytes
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = self._limit(scope.get("path", ""))
+        message = (
+            f"the request body is larger than {limit} bytes; "
+            + ("DEMCAL_MAX_UPLOAD_BYTES" if limit == self.max_upload_bytes else "DEMCAL_MAX_REQUEST_BYTES")
+            + " sets the limit"
+        )
+        declared = dict(scope.get("headers") or ()).get(b"content-length")
+        if declared is not None and (not declared.isdigit() or int(declared) > limit):
+            response = JSONResponse({"detail": message}, status_code=413)
+            await response(scope, receive, send)
+            return
+        received = 0
+
+        async def counting_receive():
+            nonlocal received
+            event = await receive()
+            if event["type"] == "http.request":
+                received += len(event.get("body", b""))
+                if received > limit:
+                    raise PayloadTooLargeError(message)
+            return event
+
+        await self.app(scope, counting_receive, send)
+
+
+def create_app(settings: Settings, engine: sa.Engine | None = None) -> FastAPI:
+    """The REST API on the database of ``settings`` (or the given engine)."""
+    engine = engine if engine is not None else create_db_engine(settings.database_url)
+    check_schema_current(engine)
+    app = FastAPI(
+        title="demcal",
+        version=__version__,
+        summary="Calibrate DEM contact parameters with a multi-objective genetic algorithm.",
+        description="Every endpoint except /healthz needs `Authorization: Bearer <key>` "
+        "(`demcal apikey create`). Errors are `{\"detail\": \"what to fix\"}` with a 4xx status.",
+    )
+    app.state.settings = settings
+    app.state.store = SqlStore(engine)
+    install_error_handlers(app)
+    for module in (studies, trials, simulations, shapes, health, metrics):
+        app.include_router(module.router)
+    app.add_middleware(
+        BodySizeLimit,
+        max_request_bytes=settings.max_request_bytes,
+        max_upload_bytes=settings.max_upload_bytes,
+    )
+    log.info("API ready on %s", engine.url.render_as_string(hide_password=True))
+    return app

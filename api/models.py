@@ -1,0 +1,215 @@
+"""The store's tables (SQLAlchemy 2 declarative models), and nothing else.
+
+These classes are the rows. They are never sent on the wire (``api/schemas.py`` holds the wire
+models) and carry no business rules (``api/store.py`` and ``api/services/`` do). Every change here
+needs an Alembic migration in ``migrations/versions/``: the server refuses to start on a schema
+that is not at the head revision.
+
+Portability notes: timestamps are stored as UTC and read back timezone-aware on SQLite too;
+objective values that may be infinite are stored as a value plus a kind column (optuna's
+``TrialValueModel`` does the same), because neither JSON nor every SQL driver round-trips inf.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+from enum import StrEnum
+from typing import Any
+
+import sqlalchemy as sa
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+NAMING_CONVENTION = {
+    "ix": "ix_%(table_name)s_%(column_0_N_name)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class UTCDateTime(sa.TypeDecorator):
+    """A timestamp that always comes back timezone-aware UTC (SQLite drops the zone otherwise)."""
+
+    impl = sa.DateTime(timezone=True)
+    cache_ok = True
+
+    def process_bind_param(self, value: datetime | None, dialect) -> datetime | None:
+        if value is None:
+            return None
+        if value.tzinfo is None:
+            value = value.replace(tzinfo=UTC)
+        value = value.astimezone(UTC)
+        # SQLite compares timestamps as text, so store them without an offset suffix.
+        return value.replace(tzinfo=None) if dialect.name == "sqlite" else value
+
+    def process_result_value(self, value: datetime | None, dialect) -> datetime | None:
+        if value is None:
+            return None
+        return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+
+
+class ValueKind(StrEnum):
+    """How an objective value is stored: finite in the value column, or one of the specials."""
+
+    FINITE = "finite"
+    INF = "inf"
+    NEG_INF = "-inf"
+    NAN = "nan"
+
+
+def encode_value(value: float | None) -> tuple[float | None, str | None]:
+    """(value column, kind column) for an objective value."""
+    if value is None:
+        return None, None
+    if math.isnan(value):
+        return None, ValueKind.NAN.value
+    if math.isinf(value):
+        return None, (ValueKind.INF if value > 0 else ValueKind.NEG_INF).value
+    return float(value), ValueKind.FINITE.value
+
+
+def decode_value(value: float | None, kind: str | None) -> float | None:
+    """The objective value back from its two columns."""
+    if kind is None:
+        return None
+    return {
+        ValueKind.FINITE: value,
+        ValueKind.INF: math.inf,
+        ValueKind.NEG_INF: -math.inf,
+        ValueKind.NAN: math.nan,
+    }[ValueKind(kind)]
+
+
+class Base(DeclarativeBase):
+    metadata = sa.MetaData(naming_convention=NAMING_CONVENTION)
+    type_annotation_map = {datetime: UTCDateTime(), dict[str, Any]: sa.JSON(), bytes: sa.LargeBinary()}
+
+
+class StudyRow(Base):
+    """A calibration study: its definition (StudyDefinition as JSON), status and GA state."""
+
+    __tablename__ = "studies"
+
+    id: Mapped[str] = mapped_column(sa.String(64), primary_key=True)
+    name: Mapped[str] = mapped_column(sa.String(200), default="")
+    owner: Mapped[str | None] = mapped_column(sa.String(100), index=True)
+    status: Mapped[str] = mapped_column(sa.String(16), index=True)
+    definition: Mapped[dict[str, Any]]
+    generation: Mapped[int] = mapped_column(default=0)
+    ga_state: Mapped[bytes | None] = mapped_column(deferred=True)
+    recommendation: Mapped[dict[str, Any] | None]
+    message: Mapped[str] = mapped_column(sa.Text, default="")
+    extra: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+    trials: Mapped[list[TrialRow]] = relationship(
+        back_populates="study", cascade="all, delete-orphan", passive_deletes=True, lazy="raise"
+    )
+
+
+class TrialRow(Base):
+    """One simulation of a study: one individual, one replicate, one seed; and its result."""
+
+    __tablename__ = "trials"
+    __table_args__ = (
+        sa.Index("ix_trials_study_generation", "study_id", "generation"),
+        sa.Index("ix_trials_study_updated", "study_id", "updated_at"),
+        sa.Index("ix_trials_study_pareto", "study_id", "pareto"),
+        sa.UniqueConstraint("study_id", "individual", "replicate"),
+    )
+
+    id: Mapped[str] = mapped_column(sa.String(100), primary_key=True)
+    study_id: Mapped[str] = mapped_column(sa.ForeignKey("studies.id", ondelete="CASCADE"))
+    individual: Mapped[int]
+    generation: Mapped[int]
+    replicate: Mapped[int]
+    seed: Mapped[int] = mapped_column(sa.BigInteger)
+    params: Mapped[dict[str, Any]]
+    scenario: Mapped[dict[str, Any]] = mapped_column(deferred=True)
+    timeout_s: Mapped[float | None]
+    state: Mapped[str] = mapped_column(sa.String(16), index=True)
+    # Result fields, copied out of the JSON result so that lists and plots need no JSON parsing.
+    status: Mapped[str | None] = mapped_column(sa.String(16))
+    n_remaining: Mapped[int | None]
+    wall_time_s: Mapped[float | None]
+    cost: Mapped[float | None]
+    dt: Mapped[float | None]
+    result: Mapped[dict[str, Any] | None] = mapped_column(deferred=True)
+    message: Mapped[str] = mapped_column(sa.Text, default="")
+    worker: Mapped[str | None] = mapped_column(sa.String(200))
+    attempts: Mapped[int] = mapped_column(default=0)
+    pareto: Mapped[bool] = mapped_column(default=False)
+    f1_value: Mapped[float | None]
+    f1_kind: Mapped[str | None] = mapped_column(sa.String(8))
+    f2_value: Mapped[float | None]
+    f2_kind: Mapped[str | None] = mapped_column(sa.String(8))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+    started_at: Mapped[datetime | None]
+    finished_at: Mapped[datetime | None]
+
+    study: Mapped[StudyRow] = relationship(back_populates="trials", lazy="raise")
+
+
+class ShapeRow(Base):
+    """An uploaded mesh (bytes kept in the database), its validation report and clump summary."""
+
+    __tablename__ = "shapes"
+
+    id: Mapped[str] = mapped_column(sa.String(64), primary_key=True)
+    owner: Mapped[str | None] = mapped_column(sa.String(100), index=True)
+    name: Mapped[str] = mapped_column(sa.String(200))
+    file_type: Mapped[str] = mapped_column(sa.String(8))
+    mass: Mapped[float]
+    n_bytes: Mapped[int]
+    sha256: Mapped[str] = mapped_column(sa.String(64))
+    data: Mapped[bytes] = mapped_column(deferred=True)
+    report: Mapped[dict[str, Any]]
+    clump: Mapped[dict[str, Any] | None]
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ApiKeyRow(Base):
+    """An API key: only the sha256 of the token is stored, never the token."""
+
+    __tablename__ = "api_keys"
+
+    id: Mapped[int] = mapped_column(primary_key=True, autoincrement=True)
+    name: Mapped[str] = mapped_column(sa.String(200), default="")
+    owner: Mapped[str] = mapped_column(sa.String(100), index=True)
+    prefix: Mapped[str] = mapped_column(sa.String(16))
+    token_sha256: Mapped[str] = mapped_column(sa.String(64), unique=True)
+    admin: Mapped[bool] = mapped_column(default=False)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    revoked_at: Mapped[datetime | None]
+    last_used_at: Mapped[datetime | None]
+
+
+class SimulationRow(Base):
+    """A single simulation asked for through the API (not part of a study), and its result."""
+
+    __tablename__ = "simulations"
+
+    id: Mapped[str] = mapped_column(sa.String(64), primary_key=True)
+    owner: Mapped[str | None] = mapped_column(sa.String(100), index=True)
+    scenario: Mapped[dict[str, Any]]
+    params: Mapped[dict[str, Any]]
+    seed: Mapped[int] = mapped_column(sa.BigInteger)
+    timeout_s: Mapped[float | None]
+    state: Mapped[str] = mapped_column(sa.String(16), index=True)
+    status: Mapped[str | None] = mapped_column(sa.String(16))
+    n_remaining: Mapped[int | None]
+    wall_time_s: Mapped[float | None]
+    result: Mapped[dict[str, Any] | None]
+    worker: Mapped[str | None] = mapped_column(sa.String(200))
+    attempts: Mapped[int] = mapped_column(default=0)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+    finished_at: Mapped[datetime | None]

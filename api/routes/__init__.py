@@ -1,0 +1,1 @@
+"""One APIRouter per resource; handlers validate, call one service function and return a model."""

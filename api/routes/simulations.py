@@ -1,0 +1,32 @@
+"""Single simulations: queue one parameter set on a scenario, read its state and result."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query, status
+
+from api.deps import ApiKeyDep, StoreDep
+from api.schemas import SimulationCreate, SimulationPage, SimulationRead
+from api.services import simulations
+
+router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
+
+
+@router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=SimulationRead)
+def create_simulation(request: SimulationCreate, principal: ApiKeyDep, store: StoreDep):
+    """Queue one simulation; poll GET /api/v1/simulations/{id} until its state is done."""
+    return simulations.create_simulation(store, request, principal)
+
+
+@router.get("", response_model=SimulationPage)
+def list_simulations(
+    principal: ApiKeyDep, store: StoreDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50, offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+):
+    return simulations.list_simulations(store, principal, limit, offset)
+
+
+@router.get("/{simulation_id}", response_model=SimulationRead)
+def get_simulation(simulation_id: str, principal: ApiKeyDep, store: StoreDep):
+    return simulations.get_simulation(store, simulation_id, principal)

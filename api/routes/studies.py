@@ -1,0 +1,102 @@
+"""Studies: create, list, read, pause/resume/cancel, delete; and the per-study views (Pareto
+front, per-generation summary, recommendation, exports). Thin handlers over ``api/services``."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Response, status
+from fastapi.responses import StreamingResponse
+
+from api.deps import ApiKeyDep, SettingsDep, StoreDep
+from api.schemas import GenerationSummary, ParetoFront, RecommendationRead, StudyPage, StudyRead
+from api.services import studies, trials
+from optimizer.protocols import StudyStatus
+from optimizer.study import StudyDefinition
+
+router = APIRouter(prefix="/api/v1/studies", tags=["studies"])
+
+Limit = Annotated[int, Query(ge=1, le=500, description="Page size.")]
+Offset = Annotated[int, Query(ge=0, le=10_000_000, description="Rows to skip.")]
+
+
+@router.post("", status_code=status.HTTP_201_CREATED, response_model=StudyRead)
+def create_study(definition: StudyDefinition, principal: ApiKeyDep, store: StoreDep, settings: SettingsDep):
+    """Create a study from a definition (the same document `demcal calibrate` reads)."""
+    return studies.create_study(
+        store, definition, principal, max_population=settings.max_population,
+        max_simulations=settings.max_simulations,
+    )
+
+
+@router.get("", response_model=StudyPage)
+def list_studies(
+    principal: ApiKeyDep, store: StoreDep, limit: Limit = 50, offset: Offset = 0,
+    status: Annotated[StudyStatus | None, Query(description="Only studies in this status.")] = None,
+):
+    return studies.list_studies(store, principal, status, limit, offset)
+
+
+@router.get("/{study_id}", response_model=StudyRead)
+def get_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    """A study with its progress (trials done / total, generation) and best trial so far."""
+    return studies.get_study(store, study_id, principal)
+
+
+@router.post("/{study_id}/pause", response_model=StudyRead)
+def pause_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    return studies.change_status(store, study_id, "pause", principal)
+
+
+@router.post("/{study_id}/resume", response_model=StudyRead)
+def resume_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    return studies.change_status(store, study_id, "resume", principal)
+
+
+@router.post("/{study_id}/cancel", response_model=StudyRead)
+def cancel_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    return studies.change_status(store, study_id, "cancel", principal)
+
+
+@router.delete("/{study_id}", status_code=status.HTTP_204_NO_CONTENT, response_class=Response)
+def delete_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    studies.delete_study(store, study_id, principal)
+
+
+@router.get("/{study_id}/pareto", response_model=ParetoFront)
+def pareto_front(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    """The current Pareto front (f1 = |N_t - target|, f2 = computation time), best f1 first."""
+    return trials.pareto_front(store, study_id, principal)
+
+
+@router.get("/{study_id}/generations", response_model=list[GenerationSummary])
+def generation_summary(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    """Median and spread of N_t and T per generation (the paper's Fig. 5)."""
+    return trials.generation_summary(store, study_id, principal)
+
+
+@router.get("/{study_id}/recommendation", response_model=RecommendationRead)
+def recommendation(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    """The recommended parameter set and every other set that matches the experiment as well."""
+    return trials.recommendation(store, study_id, principal)
+
+
+@router.get(
+    "/{study_id}/export.csv", response_class=StreamingResponse,
+    responses={200: {"content": {"text/csv": {}}, "description": "One row per trial."}},
+)
+def export_csv(study_id: str, principal: ApiKeyDep, store: StoreDep):
+    rows = trials.export_rows(store, study_id, principal)
+    return StreamingResponse(
+        trials.export_csv(rows), media_type="text/csv",
+        headers={"Content-Disposition": f'attachment; filename="{study_id}-trials.csv"'},
+    )
+
+
+@router.get("/{study_id}/export.json")
+def export_json(study_id: str, principal: ApiKeyDep, store: StoreDep) -> dict:
+    """The study (definition, status, recommendation) and every trial, in one document."""
+    return {
+        "study": studies.get_study(store, study_id, principal).model_dump(mode="json"),
+        "trials": trials.export_rows(store, study_id, principal),
+    }

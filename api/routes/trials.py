@@ -1,0 +1,41 @@
+"""Trials of a study: a filtered page (with ``updated_since`` for incremental polling), one trial."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated
+
+from fastapi import APIRouter, Query
+
+from api.deps import ApiKeyDep, StoreDep
+from api.schemas import TrialDetail, TrialPage
+from api.services import trials
+from api.store import TrialFilter
+from optimizer.protocols import TrialState
+
+router = APIRouter(prefix="/api/v1/studies/{study_id}/trials", tags=["trials"])
+
+
+@router.get("", response_model=TrialPage)
+def list_trials(
+    study_id: str,
+    principal: ApiKeyDep,
+    store: StoreDep,
+    limit: Annotated[int, Query(ge=1, le=5000, description="Page size.")] = 100,
+    offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    generation: Annotated[int | None, Query(ge=0, le=1_000_000)] = None,
+    state: Annotated[TrialState | None, Query()] = None,
+    pareto: Annotated[bool | None, Query(description="Only (non-)members of the Pareto front.")] = None,
+    updated_since: Annotated[
+        datetime | None,
+        Query(description="Only trials changed at or after this time: pass the previous page's "
+              "server_time (ISO 8601) to poll incrementally."),
+    ] = None,
+):
+    where = TrialFilter(generation=generation, state=state, pareto=pareto, updated_since=updated_since)
+    return trials.list_trials(store, study_id, principal, where, limit, offset)
+
+
+@router.get("/{trial_id}", response_model=TrialDetail)
+def get_trial(study_id: str, trial_id: str, principal: ApiKeyDep, store: StoreDep):
+    return trials.get_trial(store, study_id, trial_id, principal)

@@ -1,0 +1,106 @@
+"""Studies: creation within the service's limits, progress, and the status rules.
+
+Status transitions a client may ask for (anything else is a 409 that says what is possible):
+
+    pause:  created | running -> paused
+    resume: paused -> running
+    cancel: created | running | paused -> cancelled (pending and queued trials are cancelled too)
+    delete: any status but running (pause or cancel it first)
+
+The driver loop, not this module, moves studies to running, done or failed.
+"""
+
+from __future__ import annotations
+
+from api.auth import Principal
+from api.errors import ConflictError, InvalidInputError
+from api.schemas import Progress, StudyListItem, StudyPage, StudyRead, TrialRead
+from api.services.trials import trial_read
+from api.store import SqlStore
+from optimizer.protocols import StudyStatus, TrialState
+from optimizer.study import StudyDefinition, StudyLimitError, check_limits
+
+TRANSITIONS: dict[str, tuple[tuple[StudyStatus, ...], StudyStatus]] = {
+    "pause": ((StudyStatus.CREATED, StudyStatus.RUNNING), StudyStatus.PAUSED),
+    "resume": ((StudyStatus.PAUSED,), StudyStatus.RUNNING),
+    "cancel": ((StudyStatus.CREATED, StudyStatus.RUNNING, StudyStatus.PAUSED), StudyStatus.CANCELLED),
+}
+
+
+def create_study(
+    store: SqlStore, definition: StudyDefinition, principal: Principal, *, max_population: int,
+    max_simulations: int,
+) -> StudyRead:
+    try:
+        check_limits(definition, max_population=max_population, max_simulations=max_simulations)
+    except StudyLimitError as exc:
+        raise InvalidInputError(str(exc)) from None
+    study_id = store.create_study(definition.model_dump(mode="json"), owner=principal.owner)
+    return get_study(store, study_id, principal)
+
+
+def _budget(definition: dict) -> tuple[int, int]:
+    """(simulations, generations) the definition allows; (0, 0) if it cannot be read."""
+    try:
+        parsed = StudyDefinition.model_validate(definition)
+    except ValueError:
+        return 0, 0
+    return parsed.total_simulations(), parsed.ga.generations
+
+
+def get_study(store: SqlStore, study_id: str, principal: Principal) -> StudyRead:
+    row = store.get_study(study_id, principal.visible_to)
+    counts = store.trial_state_counts(study_id)
+    trials_total, generations_total = _budget(row.definition)
+    best = store.best_trial(study_id)
+    return StudyRead(
+        id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status), message=row.message,
+        definition=row.definition,
+        progress=Progress(
+            trials_total=trials_total, trials_done=counts.get(TrialState.DONE.value, 0),
+            trials_by_state=counts, generation=row.generation, generations_total=generations_total,
+        ),
+        best=trial_read(best) if best is not None else None,
+        recommendation=row.recommendation, created_at=row.created_at, updated_at=row.updated_at,
+    )
+
+
+def list_studies(
+    store: SqlStore, principal: Principal, status: StudyStatus | None, limit: int, offset: int
+) -> StudyPage:
+    page = store.list_studies(principal.visible_to, status, limit, offset)
+    done = store.done_counts([row.id for row in page.items])
+    items = [
+        StudyListItem(
+            id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status), message=row.message,
+            generation=row.generation, trials_done=done.get(row.id, 0),
+            trials_total=_budget(row.definition)[0], created_at=row.created_at, updated_at=row.updated_at,
+        )
+        for row in page.items
+    ]
+    return StudyPage(items=items, total=page.total, limit=limit, offset=offset)
+
+
+def change_status(store: SqlStore, study_id: str, action: str, principal: Principal) -> StudyRead:
+    row = store.get_study(study_id, principal.visible_to)
+    allowed_from, to = TRANSITIONS[action]
+    if not store.transition(study_id, allowed_from, to, message=f"{action} by {principal.owner}"):
+        current = store.get_study(study_id).status
+        possible = [name for name, (sources, _) in TRANSITIONS.items() if current in sources]
+        raise ConflictError(
+            f"cannot {action} study {row.id!r}: it is {current}; "
+            + (f"possible now: {', '.join(possible)}" if possible else "it is finished and cannot change")
+        )
+    return get_study(store, study_id, principal)
+
+
+def delete_study(store: SqlStore, study_id: str, principal: Principal) -> None:
+    row = store.get_study(study_id, principal.visible_to)
+    if row.status == StudyStatus.RUNNING.value:
+        raise ConflictError(f"study {study_id!r} is running: pause or cancel it first, then delete it")
+    store.delete_study(study_id)
+
+
+def best_trial_read(store: SqlStore, study_id: str) -> TrialRead | None:
+    best = store.best_trial(study_id)
+    return trial_read(best) if best is not None else None

@@ -1,0 +1,184 @@
+"""Trials of a study as clients read them: pages, one trial, the Pareto front, the per-generation
+summary (median and spread of N_t and T per generation: the paper's Fig. 5), the recommendation
+with its equivalent sets, and CSV/JSON exports.
+
+It reads only; the optimiser (through the store) is the one that writes objectives and Pareto
+flags. Every function first checks that the caller may see the study (404 otherwise).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Iterator
+
+import numpy as np
+
+from api.auth import Principal
+from api.models import TrialRow, decode_value
+from api.schemas import (
+    GenerationSummary,
+    ParetoFront,
+    ParetoPoint,
+    RecommendationRead,
+    Spread,
+    TrialDetail,
+    TrialPage,
+    TrialRead,
+    finite_or_none,
+)
+from api.store import SqlStore, TrialFilter
+from optimizer.protocols import PARAMETER_NAMES, StudyStatus
+from optimizer.study import StudyDefinition
+
+CSV_COLUMNS = (
+    "trial_id", "generation", "individual", "replicate", "seed", *PARAMETER_NAMES, "state", "status",
+    "n_remaining", "wall_time_s", "cost", "f1", "f2", "pareto", "worker", "attempts", "message",
+)
+
+
+def _objectives(row) -> tuple[float | None, float | None]:
+    f1 = decode_value(row.f1_value, row.f1_kind)
+    f2 = decode_value(row.f2_value, row.f2_kind)
+    return finite_or_none(f1), finite_or_none(f2)
+
+
+def trial_read(row: TrialRow) -> TrialRead:
+    f1, f2 = _objectives(row)
+    return TrialRead(
+        id=row.id, generation=row.generation, individual=row.individual, replicate=row.replicate,
+        seed=row.seed, params=row.params, state=row.state, status=row.status, n_remaining=row.n_remaining,
+        wall_time_s=row.wall_time_s, cost=row.cost, f1=f1, f2=f2, pareto=row.pareto, worker=row.worker,
+        attempts=row.attempts, message=row.message, updated_at=row.updated_at,
+    )
+
+
+def _pareto_point(row) -> ParetoPoint:
+    f1, f2 = _objectives(row)
+    return ParetoPoint(
+        id=row.id, generation=row.generation, individual=row.individual, replicate=row.replicate,
+        params=row.params, n_remaining=row.n_remaining, wall_time_s=row.wall_time_s, cost=row.cost,
+        f1=f1, f2=f2,
+    )
+
+
+def list_trials(
+    store: SqlStore, study_id: str, principal: Principal, where: TrialFilter, limit: int, offset: int
+) -> TrialPage:
+    from api.models import utcnow
+
+    store.get_study(study_id, principal.visible_to)
+    # Taken before the query, so a row updated while we read is sent again next poll, not missed.
+    server_time = utcnow()
+    page = store.list_trials(study_id, where, limit, offset)
+    return TrialPage(
+        items=[trial_read(row) for row in page.items], total=page.total, limit=limit, offset=offset,
+        server_time=server_time,
+    )
+
+
+def get_trial(store: SqlStore, study_id: str, trial_id: str, principal: Principal) -> TrialDetail:
+    store.get_study(study_id, principal.visible_to)
+    row = store.get_trial(study_id, trial_id)
+    compact = trial_read(row)
+    return TrialDetail(
+        **compact.model_dump(), dt=row.dt, timeout_s=row.timeout_s, result=row.result,
+        created_at=row.created_at, started_at=row.started_at, finished_at=row.finished_at,
+    )
+
+
+def pareto_front(store: SqlStore, study_id: str, principal: Principal) -> ParetoFront:
+    study = store.get_study(study_id, principal.visible_to)
+    rows = store.pareto_rows(study_id)
+    points = sorted((_pareto_point(row) for row in rows), key=lambda p: (_sort_key(p.f1), _sort_key(p.f2)))
+    return ParetoFront(study_id=study_id, generation=study.generation, points=points)
+
+
+def _sort_key(value: float | None) -> float:
+    return math.inf if value is None else value
+
+
+def _spread(values: list[float]) -> Spread | None:
+    if not values:
+        return None
+    q1, median, q3 = np.percentile(values, [25, 50, 75])
+    return Spread(
+        median=float(median), q1=float(q1), q3=float(q3), min=float(min(values)), max=float(max(values))
+    )
+
+
+def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> list[GenerationSummary]:
+    store.get_study(study_id, principal.visible_to)
+    by_generation: dict[int, list] = {}
+    for row in store.trial_columns(study_id):
+        by_generation.setdefault(row.generation, []).append(row)
+    summaries = []
+    for generation, rows in sorted(by_generation.items()):
+        done = [row for row in rows if row.state == "done"]
+        ok = [row for row in done if row.status == "ok"]
+        f1_values = [f1 for f1 in (_objectives(row)[0] for row in done) if f1 is not None]
+        summaries.append(
+            GenerationSummary(
+                generation=generation, trials=len(rows), done=len(done), ok=len(ok),
+                failed=len(done) - len(ok),
+                n_remaining=_spread([row.n_remaining for row in ok if row.n_remaining is not None]),
+                wall_time_s=_spread([row.wall_time_s for row in ok if row.wall_time_s is not None]),
+                cost=_spread([row.cost for row in ok if row.cost is not None]),
+                best_f1=min(f1_values) if f1_values else None,
+            )
+        )
+    return summaries
+
+
+def recommendation(store: SqlStore, study_id: str, principal: Principal) -> RecommendationRead:
+    study = store.get_study(study_id, principal.visible_to)
+    try:
+        tolerance = StudyDefinition.model_validate(study.definition).experiment.tolerance
+    except ValueError:
+        tolerance = 0.0
+    matching: dict[int, ParetoPoint] = {}
+    for row in store.trial_columns(study_id):
+        point = _pareto_point(row)
+        if row.status != "ok" or point.f1 is None or point.f1 > tolerance:
+            continue
+        # One entry per parameter set: replicates of an individual share their objectives.
+        matching.setdefault(row.individual, point)
+    equivalent = sorted(matching.values(), key=lambda p: (_sort_key(p.f2), _sort_key(p.f1)))
+    return RecommendationRead(
+        study_id=study_id, status=StudyStatus(study.status), recommendation=study.recommendation,
+        equivalent=equivalent,
+    )
+
+
+def export_rows(store: SqlStore, study_id: str, principal: Principal) -> list[dict]:
+    store.get_study(study_id, principal.visible_to)
+    rows = []
+    for row in store.trial_rows_for_export(study_id):
+        f1, f2 = _objectives(row)
+        rows.append(
+            {
+                "trial_id": row.id, "generation": row.generation, "individual": row.individual,
+                "replicate": row.replicate, "seed": row.seed,
+                **{name: row.params.get(name) for name in PARAMETER_NAMES},
+                "state": row.state, "status": row.status, "n_remaining": row.n_remaining,
+                "wall_time_s": row.wall_time_s, "cost": row.cost, "f1": f1, "f2": f2,
+                "pareto": row.pareto, "worker": row.worker, "attempts": row.attempts,
+                "message": row.message,
+            }
+        )
+    return rows
+
+
+def export_csv(rows: list[dict]) -> Iterator[str]:
+    """CSV text in chunks, so a large study streams instead of building one big string."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for index, row in enumerate(rows, start=1):
+        writer.writerow({key: "" if value is None else value for key, value in row.items()})
+        if index % 500 == 0:
+            yield buffer.getvalue()
+            buffer.seek(0)
+            buffer.truncate()
+    yield buffer.getvalue()
