@@ -17,6 +17,8 @@ from api.settings import SettingsError, get_settings
 
 COMMAND_MODULES = (
     "api.commands.config",
+    "api.commands.db",
+    "api.commands.apikey",
     "api.commands.worker",
 )
 
