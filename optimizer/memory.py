@@ -1,0 +1,179 @@
+"""In-memory Store and a synthetic Executor, for unit tests of the optimiser only.
+
+``MemoryStore`` keeps the same promises as the SQL store (``api/store.py``): a result is recorded
+once, a stored trial is never overwritten by ``add_trials``, records handed out are copies.
+``SyntheticExecutor`` computes a result from a formula instead of a DEM simulation, so the GA,
+the ranking and the driver can be tested in milliseconds; it must never be used for a real study,
+and nothing outside ``tests/`` may import it for that.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import threading
+import uuid
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from dem.result import SimulationResult, SimulationStatus
+from optimizer.protocols import (
+    StudyRecord,
+    StudyStatus,
+    TrialOutcome,
+    TrialRecord,
+    TrialSpec,
+    TrialState,
+)
+
+
+class UnknownStudyError(KeyError):
+    """No study with this id."""
+
+
+class MemoryStore:
+    """A dict-backed Store; every method holds one lock, like a transaction."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._studies: dict[str, StudyRecord] = {}
+        self._trials: dict[str, TrialRecord] = {}
+        self.generations: list[tuple[str, int, list[str]]] = []
+
+    def create_study(self, definition: dict[str, Any], owner: str | None = None) -> str:
+        study_id = uuid.uuid4().hex[:12]
+        with self._lock:
+            self._studies[study_id] = StudyRecord(
+                study_id, copy.deepcopy(definition), StudyStatus.CREATED, extra={"owner": owner}
+            )
+        return study_id
+
+    def load_study(self, study_id: str) -> StudyRecord:
+        with self._lock:
+            if study_id not in self._studies:
+                raise UnknownStudyError(study_id)
+            return copy.deepcopy(self._studies[study_id])
+
+    def set_status(self, study_id: str, status: StudyStatus, message: str = "") -> None:
+        with self._lock:
+            self._studies[study_id].status = status
+            self._studies[study_id].message = message
+
+    def add_trials(self, specs: Sequence[TrialSpec]) -> None:
+        with self._lock:
+            for spec in specs:
+                self._trials.setdefault(spec.trial_id, TrialRecord(spec, TrialState.PENDING))
+
+    def trials(self, study_id: str, states: Sequence[TrialState] | None = None) -> list[TrialRecord]:
+        with self._lock:
+            return [
+                copy.deepcopy(record)
+                for record in self._trials.values()
+                if record.spec.study_id == study_id and (states is None or record.state in states)
+            ]
+
+    def mark_queued(self, trial_ids: Sequence[str]) -> None:
+        with self._lock:
+            for tid in trial_ids:
+                record = self._trials[tid]
+                if record.state is not TrialState.DONE:
+                    record.state = TrialState.QUEUED
+                    record.attempts += 1
+
+    def mark_running(self, trial_id: str, worker: str | None = None) -> None:
+        with self._lock:
+            record = self._trials[trial_id]
+            if record.state is not TrialState.DONE:
+                record.state = TrialState.RUNNING
+                record.worker = worker
+
+    def record_result(self, outcome: TrialOutcome) -> bool:
+        with self._lock:
+            record = self._trials.get(outcome.trial_id)
+            if record is None or record.result is not None:
+                return False
+            record.result = outcome.result
+            record.state = TrialState.DONE
+            record.worker = outcome.worker
+            return True
+
+    def save_generation(
+        self,
+        study_id: str,
+        generation: int,
+        ga_state: bytes,
+        pareto_trial_ids: Sequence[str],
+        recommendation: dict[str, Any] | None,
+    ) -> None:
+        with self._lock:
+            study = self._studies[study_id]
+            study.generation = generation
+            study.ga_state = ga_state
+            study.recommendation = copy.deepcopy(recommendation)
+            self.generations.append((study_id, generation, list(pareto_trial_ids)))
+
+
+def synthetic_result(spec: TrialSpec, n_items: int = 30) -> SimulationResult:
+    """A stand-in for the feeder: N_t falls with log E and rises with mu, plus seeded noise;
+    cost grows as sqrt(E) like a DEM step count. A smooth, noisy, two-objective landscape."""
+    params = spec.params
+    drive = 2.5 * (math.log10(params["E"]) - 7.0) - 6.0 * (params["mu"] - 0.4) - 2.0 * (params["e"] - 0.5)
+    expected = n_items / (1.0 + math.exp(drive))
+    noise = np.random.default_rng(spec.seed).normal(0.0, 1.0)
+    n_remaining = int(min(max(round(expected + noise), 0), n_items))
+    steps = int(1000 * math.sqrt(params["E"] / 1e5))
+    return SimulationResult(
+        status=SimulationStatus.OK,
+        n_items=n_items,
+        n_remaining=n_remaining,
+        wall_time_s=steps * 1e-4,
+        steps=steps,
+        cost=float(steps * (n_items + 10)),
+        params=params,
+        seed=spec.seed,
+    )
+
+
+class SyntheticExecutor:
+    """Runs trials with a formula. ``per_poll`` limits how many finish per poll, to exercise
+    partial batches; ``respond`` may return a failing result to exercise penalties."""
+
+    def __init__(
+        self,
+        respond: Callable[[TrialSpec], SimulationResult] = synthetic_result,
+        per_poll: int | None = None,
+    ):
+        self.respond = respond
+        self.per_poll = per_poll
+        self.queue: deque[TrialSpec] = deque()
+        self.submitted: list[str] = []
+        self.cancelled: list[str] = []
+
+    def submit(self, specs: Sequence[TrialSpec]) -> None:
+        queued = {spec.trial_id for spec in self.queue}
+        for spec in specs:
+            if spec.trial_id not in queued:
+                self.queue.append(spec)
+                self.submitted.append(spec.trial_id)
+                queued.add(spec.trial_id)
+
+    def poll(self, timeout: float = 0.0) -> list[TrialOutcome]:
+        count = len(self.queue) if self.per_poll is None else min(self.per_poll, len(self.queue))
+        return [
+            TrialOutcome(spec.trial_id, self.respond(spec), worker="synthetic")
+            for spec in (self.queue.popleft() for _ in range(count))
+        ]
+
+    def in_flight(self) -> set[str]:
+        return {spec.trial_id for spec in self.queue}
+
+    def cancel(self, trial_ids: Sequence[str]) -> None:
+        doomed = set(trial_ids)
+        self.cancelled.extend(spec.trial_id for spec in self.queue if spec.trial_id in doomed)
+        self.queue = deque(spec for spec in self.queue if spec.trial_id not in doomed)
+
+    def close(self) -> None:
+        self.queue.clear()

@@ -1,0 +1,104 @@
+"""Ranking a study's individuals: Pareto fronts, the recommendation and the equivalent sets.
+
+- Fronts: pymoo's non-dominated sorting of (f1, f2), both minimised.
+- Recommendation: the fastest (lowest f2) individual whose f1 is within the experiment's
+  tolerance. Such an individual is always on the first front unless another one is exactly as
+  fast and matches better, in which case that one is chosen: ties go to the lower f1, then the
+  earlier individual.
+- Equivalent sets: the other matching individuals, slower ones included, kept only when they are
+  distinct in parameter space (normalised gene distance at least ``min_distance`` from every set
+  already listed). The paper expects the calibration to be multimodal; an engineer picking a
+  parameter set should see that other, different sets reproduce the experiment as well.
+
+This module ranks what it is given; it must not read stores or decide when a study ends.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+
+from optimizer.objectives import Evaluation
+from optimizer.space import ParameterSpace
+
+DEFAULT_MIN_DISTANCE = 0.1
+
+
+def fronts(evaluations: Sequence[Evaluation]) -> list[list[Evaluation]]:
+    """Non-dominated fronts, best first; each front sorted by f2 (fastest first)."""
+    if not evaluations:
+        return []
+    objectives = np.array([[evaluation.f1, evaluation.f2] for evaluation in evaluations], dtype=float)
+    ranked = NonDominatedSorting().do(objectives)
+    return [sorted((evaluations[i] for i in front), key=lambda ev: (ev.f2, ev.f1)) for front in ranked]
+
+
+@dataclass(frozen=True)
+class Ranking:
+    pareto: list[Evaluation]
+    recommendation: Evaluation | None
+    equivalent: list[Evaluation]
+    best_f1: float | None
+
+
+def _distance(space: ParameterSpace, a: Evaluation, b: Evaluation) -> float:
+    """Euclidean distance of the genes, divided by sqrt(n) so that it is 1 across the whole box."""
+    difference = space.genes(a.params) - space.genes(b.params)
+    return float(np.linalg.norm(difference) / math.sqrt(max(space.n_genes, 1)))
+
+
+def rank(
+    evaluations: Sequence[Evaluation],
+    tolerance: float,
+    space: ParameterSpace,
+    min_distance: float = DEFAULT_MIN_DISTANCE,
+) -> Ranking:
+    matching = sorted(
+        (evaluation for evaluation in evaluations if evaluation.matches(tolerance)),
+        key=lambda ev: (ev.f2, ev.f1, ev.individual),
+    )
+    listed: list[Evaluation] = []
+    for candidate in matching:
+        if all(_distance(space, candidate, kept) >= min_distance for kept in listed):
+            listed.append(candidate)
+    all_fronts = fronts(evaluations)
+    return Ranking(
+        pareto=all_fronts[0] if all_fronts else [],
+        recommendation=listed[0] if listed else None,
+        equivalent=listed[1:],
+        best_f1=min((evaluation.f1 for evaluation in evaluations if evaluation.ok), default=None),
+    )
+
+
+def summary(evaluation: Evaluation) -> dict:
+    """An individual as JSON: what the store keeps as the recommendation and the CLI prints."""
+    return {
+        "individual": evaluation.individual,
+        "generation": evaluation.generation,
+        "params": evaluation.params,
+        "f1": evaluation.f1,
+        "f2": evaluation.f2,
+        "n_remaining": evaluation.n_remaining,
+        "wall_time_s": evaluation.wall_time_s,
+        "cost": evaluation.cost,
+        "trial_ids": evaluation.trial_ids,
+    }
+
+
+def recommendation_json(
+    ranking: Ranking, target: float, tolerance: float, objective_time: str
+) -> dict | None:
+    """The stored recommendation: the chosen set, how it was chosen, and its equivalents."""
+    if ranking.recommendation is None:
+        return None
+    return {
+        **summary(ranking.recommendation),
+        "target": target,
+        "tolerance": tolerance,
+        "objective_time": objective_time,
+        "equivalent": [summary(evaluation) for evaluation in ranking.equivalent],
+    }

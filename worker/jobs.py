@@ -1,0 +1,63 @@
+"""The job function: one trial in, one simulation result out, as plain JSON-able dicts.
+
+``run_trial(spec)`` is what every executor runs (the local process pool, the RQ worker through
+``worker/rq_job.py``). ``spec`` is a ``TrialSpec`` as a dict: the feeder scenario inline, the
+contact parameters, the seed, an optional wall-clock limit. It never raises: a bad scenario, an
+exception in the engine, or anything else becomes a result with status ``error`` and a message,
+so one bad simulation never takes a study or a worker down. Only ``BaseException``s that are not
+``Exception`` (KeyboardInterrupt, SystemExit) pass through: they mean the process is stopping.
+
+Must not: open a database, talk to Redis, or know about studies beyond the spec it is handed.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from typing import Any
+
+from dem.result import SimulationResult, SimulationStatus
+
+logger = logging.getLogger(__name__)
+
+
+def run_trial(
+    spec: dict[str, Any],
+    *,
+    should_stop: Callable[[], bool] | None = None,
+    progress: Callable[[float, int], None] | None = None,
+) -> dict[str, Any]:
+    """Run one simulation for ``spec``; returns ``SimulationResult.model_dump(mode="json")``."""
+    started = time.monotonic()
+    params = spec.get("params") or {}
+    seed = spec.get("seed", 0)
+    try:
+        from dem.scenarios.feeder import FeederConfig, run_feeder
+
+        config = FeederConfig.model_validate(spec["scenario"])
+        timeout_s = spec.get("timeout_s")
+        deadline = started + float(timeout_s) if timeout_s else None
+        result = run_feeder(
+            config, dict(params), int(seed), deadline=deadline, should_stop=should_stop, progress=progress
+        )
+    except Exception as exc:  # the contract: a result, never a traceback
+        logger.exception("trial %s failed before or inside the simulation", spec.get("trial_id"))
+        result = SimulationResult(
+            status=SimulationStatus.ERROR,
+            message=f"{type(exc).__name__}: {exc}",
+            params=_floats(params),
+            seed=seed if isinstance(seed, int) and seed >= 0 else 0,
+            wall_time_s=time.monotonic() - started,
+        )
+    return result.model_dump(mode="json")
+
+
+def _floats(params: dict[str, Any]) -> dict[str, float]:
+    clean = {}
+    for name, value in params.items():
+        try:
+            clean[str(name)] = float(value)
+        except (TypeError, ValueError):
+            continue  # an unusable value is already named in the error message
+    return clean
