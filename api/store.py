@@ -215,12 +215,16 @@ class SqlStore:
         recommendation: dict[str, Any] | None,
         objectives: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
-        """Persist the GA after a generation, atomically with its Pareto ranking.
+        """Persist the GA after a generation, atomically with its Pareto ranking and objectives.
 
-        ``objectives`` optionally maps trial ids to their (f1, f2); values may be infinite.
+        ``objectives`` maps trial ids to their (f1, f2) (values may be infinite). Without it the
+        objectives of every finished individual are computed here with the optimiser's own
+        ``optimizer.objectives.evaluate``, so that lists and plots show the f1/f2 the GA was told.
         """
         with self.session() as s:
             row = self._study_row(s, study_id)
+            if objectives is None:
+                objectives = self._evaluate(s, row)
             row.generation = generation
             row.ga_state = ga_state
             row.recommendation = recommendation
@@ -246,6 +250,23 @@ class SqlStore:
                          "f2_value": f2_value, "f2_kind": f2_kind, "updated_at": now}
                     )
                 s.execute(sa.update(TrialRow), updates)
+
+    def _evaluate(self, s, study: StudyRow) -> dict[str, tuple[float, float]]:
+        from optimizer.objectives import evaluate
+        from optimizer.study import StudyDefinition
+
+        definition = StudyDefinition.model_validate(study.definition)
+        rows = s.scalars(
+            sa.select(TrialRow)
+            .where(TrialRow.study_id == study.id, TrialRow.state == TrialState.DONE.value)
+            .options(undefer(TrialRow.scenario), undefer(TrialRow.result))
+        )
+        records = [_trial_record(row) for row in rows if row.result is not None]
+        return {
+            tid: (evaluation.f1, evaluation.f2)
+            for evaluation in evaluate(records, definition, definition.n_items())
+            for tid in evaluation.trial_ids
+        }
 
     # ---- trials ----------------------------------------------------------------------------
 

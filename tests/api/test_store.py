@@ -1,0 +1,208 @@
+"""The SQL store keeps the optimiser's Store contract on SQLite and PostgreSQL: idempotent
+results, atomic generations, the driver's whole loop, and the single-simulation queue."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import pytest
+
+from api.errors import NotFoundError
+from api.models import TrialRow
+from dem.result import SimulationResult, SimulationStatus
+from optimizer.driver import Driver
+from optimizer.memory import SyntheticExecutor
+from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, TrialState, trial_id
+from optimizer.study import StudyDefinition
+from tests.api.conftest import study_definition
+
+
+def _definition() -> dict:
+    return StudyDefinition.model_validate(study_definition()).model_dump(mode="json")
+
+
+def _specs(study_id: str, count: int, generation: int = 0) -> list[TrialSpec]:
+    return [
+        TrialSpec(
+            trial_id=trial_id(study_id, i, 0), study_id=study_id, individual=i, generation=generation,
+            replicate=0, seed=100 + i, params={"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.1 * (i + 1)},
+            scenario={"items": {"counts": {"camera": 1}}},
+        )
+        for i in range(count)
+    ]
+
+
+def _result(n_remaining: int, wall: float = 1.0) -> SimulationResult:
+    return SimulationResult(status=SimulationStatus.OK, n_items=30, n_remaining=n_remaining, wall_time_s=wall,
+                            cost=wall * 1000)
+
+
+def test_add_trials_stores_pending_and_keeps_existing_ones(store):
+    study_id = store.create_study(_definition(), owner="alice")
+    specs = _specs(study_id, 3)
+    store.add_trials(specs)
+    store.mark_queued([specs[0].trial_id])
+
+    store.add_trials(specs)
+
+    states = {record.spec.trial_id: record.state for record in store.trials(study_id)}
+    assert states == {specs[0].trial_id: TrialState.QUEUED, specs[1].trial_id: TrialState.PENDING,
+                      specs[2].trial_id: TrialState.PENDING}
+    assert store.trials(study_id)[1].spec == specs[1]
+
+
+def test_record_result_is_idempotent(store):
+    study_id = store.create_study(_definition(), owner=None)
+    spec = _specs(study_id, 1)[0]
+    store.add_trials([spec])
+
+    first = store.record_result(TrialOutcome(spec.trial_id, _result(4), worker="w1"))
+    second = store.record_result(TrialOutcome(spec.trial_id, _result(9), worker="w2"))
+
+    record = store.trials(study_id)[0]
+    assert (first, second) == (True, False)
+    assert record.state is TrialState.DONE
+    assert record.result.n_remaining == 4
+    assert record.worker == "w1"
+
+
+def test_racing_results_are_recorded_exactly_once(store):
+    study_id = store.create_study(_definition(), owner=None)
+    spec = _specs(study_id, 1)[0]
+    store.add_trials([spec])
+    outcomes, barrier = [], threading.Barrier(8)
+
+    def send(n: int) -> None:
+        barrier.wait()
+        outcomes.append(store.record_result(TrialOutcome(spec.trial_id, _result(n))))
+
+    threads = [threading.Thread(target=send, args=(n,)) for n in range(8)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+
+    assert sorted(outcomes) == [False] * 7 + [True]
+
+
+def test_result_for_an_unknown_trial_changes_nothing(store):
+    assert store.record_result(TrialOutcome("st-gone-i00000-r00", _result(1))) is False
+
+
+def test_save_generation_is_atomic(store):
+    study_id = store.create_study(_definition(), owner=None)
+    specs = _specs(study_id, 2)
+    store.add_trials(specs)
+    store.save_generation(study_id, 1, b"state-1", [specs[0].trial_id], {"params": {"E": 1.0}})
+
+    with pytest.raises(TypeError):
+        # A malformed objective fails after the generation, GA state and flags were written.
+        store.save_generation(study_id, 2, b"state-2", [specs[1].trial_id], None,
+                              objectives={specs[1].trial_id: ("not a number", 1.0)})
+
+    study = store.load_study(study_id)
+    pareto = {row.id for row in store.pareto_rows(study_id)}
+    assert (study.generation, study.ga_state, study.recommendation) == (1, b"state-1", {"params": {"E": 1.0}})
+    assert pareto == {specs[0].trial_id}
+
+
+def test_save_generation_stores_infinite_objectives_portably(store):
+    study_id = store.create_study(_definition(), owner=None)
+    specs = _specs(study_id, 2)
+    store.add_trials(specs)
+
+    objectives = {specs[0].trial_id: (math.inf, 2.5), specs[1].trial_id: (0.5, -math.inf)}
+
+    store.save_generation(study_id, 1, b"s", [], None, objectives=objectives)
+
+    rows = {row.id: row for row in store.trial_columns(study_id)}
+    assert (rows[specs[0].trial_id].f1_kind, rows[specs[0].trial_id].f2_value) == ("inf", 2.5)
+    assert (rows[specs[1].trial_id].f1_value, rows[specs[1].trial_id].f2_kind) == (0.5, "-inf")
+
+
+def test_save_generation_computes_the_optimisers_objectives_when_not_given(store):
+    study_id = store.create_study(_definition(), owner=None)
+    specs = _specs(study_id, 2)
+    store.add_trials(specs)
+    store.record_result(TrialOutcome(specs[0].trial_id, _result(4, wall=2.0)))
+    store.record_result(TrialOutcome(specs[1].trial_id, _result(9, wall=1.0)))
+
+    store.save_generation(study_id, 1, b"s", [specs[0].trial_id], None)
+
+    rows = {row.id: row for row in store.trial_columns(study_id)}
+    # Target: median of the measurements [3 4 4 2 5 3 4 6 3 4] = 4; f2 = cost (the default).
+    assert (rows[specs[0].trial_id].f1_value, rows[specs[0].trial_id].f2_value) == (0.0, 2000.0)
+    assert (rows[specs[1].trial_id].f1_value, rows[specs[1].trial_id].f2_value) == (5.0, 1000.0)
+
+
+def test_driver_runs_a_whole_study_on_the_sql_store(store):
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 6, "offspring": 3, "generations": 2}, seed=3)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="alice")
+
+    progress = Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+
+    trials = store.trials(study_id)
+    assert progress.status is StudyStatus.DONE
+    assert len(trials) == 12
+    assert all(record.state is TrialState.DONE for record in trials)
+    assert store.load_study(study_id).recommendation == progress.recommendation
+    assert store.pareto_rows(study_id)
+    assert store.best_trial(study_id) is not None
+
+
+def test_queue_bookkeeping_counts_attempts_and_requeues_lost_trials(store):
+    study_id = store.create_study(_definition(), owner=None)
+    spec = _specs(study_id, 1)[0]
+    store.add_trials([spec])
+
+    store.mark_queued([spec.trial_id])
+    store.mark_running(spec.trial_id, worker="w1")
+    store.requeue([spec.trial_id])
+    store.mark_queued([spec.trial_id])
+
+    record = store.trials(study_id)[0]
+    assert (record.state, record.attempts, record.worker) == (TrialState.QUEUED, 2, "w1")
+
+
+def test_cancelling_a_study_cancels_its_waiting_trials(store):
+    study_id = store.create_study(_definition(), owner=None)
+    specs = _specs(study_id, 2)
+    store.add_trials(specs)
+    store.record_result(TrialOutcome(specs[0].trial_id, _result(3)))
+
+    store.transition(study_id, [StudyStatus.CREATED], StudyStatus.CANCELLED)
+
+    states = [record.state for record in store.trials(study_id)]
+    assert states == [TrialState.DONE, TrialState.CANCELLED]
+
+
+def test_deleting_a_study_deletes_its_trials(store):
+    study_id = store.create_study(_definition(), owner=None)
+    store.add_trials(_specs(study_id, 2))
+
+    store.delete_study(study_id)
+
+    with pytest.raises(NotFoundError):
+        store.load_study(study_id)
+    with store.session() as session:
+        assert session.query(TrialRow).count() == 0
+
+
+def test_single_simulation_moves_pending_queued_done_once(store):
+    sim_id = store.create_simulation({"items": {}}, {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.4}, 5, "alice")
+
+    pending = store.pending_simulations()
+    queued_twice = [store.mark_simulation_queued(sim_id), store.mark_simulation_queued(sim_id)]
+    recorded = [store.record_simulation_result(sim_id, _result(2), "w"),
+                store.record_simulation_result(sim_id, _result(7), "w")]
+
+    row = store.get_simulation(sim_id)
+    assert [spec.trial_id for spec in pending] == [sim_id]
+    assert pending[0].seed == 5
+    assert queued_twice == [True, False]
+    assert recorded == [True, False]
+    assert (row.state, row.n_remaining, row.result["n_remaining"]) == ("done", 2, 2)
+    assert store.pending_simulations() == []
