@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "api.commands.db",
     "api.commands.apikey",
     "api.commands.worker",
+    "api.commands.serve",
 )
 
 app = typer.Typer(

@@ -1,0 +1,323 @@
+"""The background loop of ``demcal serve``: it advances every running study and runs every
+pending single simulation through the executor, and keeps the database and the queue in step.
+
+* **One driver per study, whatever the number of replicas.** A study is advanced only by the
+  ``serve`` process holding its lease: a Redis key ``demcal:lease:<study>`` set with ``NX`` and an
+  expiry (``LEASE_TTL_S``), renewed at every tick by its holder and released when the study ends
+  or the process stops. A replica that dies stops renewing, so its studies are taken over by
+  another within ``LEASE_TTL_S``. If Redis is flushed, the holder re-takes its leases at its next
+  tick (a second or so), before any other replica's next scan (``scan_every_s``). Without Redis
+  (embedded executor) there is one serve process by construction and the lease is local.
+* **Reconciliation**, on start and periodically (``reconcile_every_s``): the driver re-submits
+  trials the database holds as queued or running but the executor does not know (a flushed or
+  restarted Redis, a restarted process with a local pool); this loop also lets the executor move
+  jobs of dead workers out of its started registry (they are retried, or reported as errors) and
+  re-submits lost single simulations. The database is the truth; nothing is lost, and a result
+  that arrives twice is recorded once (the store ignores the second).
+* **Single simulations** share the executor with trials; their outcomes are told apart by asking
+  the store and recorded with ``record_simulation_result``.
+
+Must not: serve HTTP or know the GA; it only composes the driver, the store and an executor.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import threading
+import time
+import uuid
+from collections.abc import Sequence
+from typing import Any
+
+import sqlalchemy as sa
+
+from api.errors import NotFoundError
+from api.models import SimulationRow
+from api.settings import Settings
+from api.store import SqlStore
+from optimizer.driver import Driver
+from optimizer.protocols import Executor, StudyStatus, TrialOutcome, TrialSpec, TrialState
+
+logger = logging.getLogger(__name__)
+
+LEASE_TTL_S = 30.0
+ACTIVE_STUDIES = (StudyStatus.CREATED, StudyStatus.RUNNING)
+# Statuses whose in-flight work the driver must withdraw (it does so when stepped once more).
+STOPPING_STUDIES = (StudyStatus.PAUSED, StudyStatus.CANCELLED)
+
+
+def owner_id() -> str:
+    """This process, as lease holders are named: readable in Redis, unique per start."""
+    return f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+
+
+class RedisLeases:
+    """Study leases in Redis: ``SET NX PX`` to take, compare-and-expire to renew, compare-and-
+    delete to release (Lua, so that a holder never renews or frees a lease it lost)."""
+
+    _RENEW = """
+    local holder = redis.call('GET', KEYS[1])
+    if holder == ARGV[1] then
+        return redis.call('PEXPIRE', KEYS[1], ARGV[2])
+    elseif not holder then
+        return redis.call('SET', KEYS[1], ARGV[1], 'NX', 'PX', ARGV[2]) and 1 or 0
+    end
+    return 0
+    """
+    _RELEASE = """
+    if redis.call('GET', KEYS[1]) == ARGV[1] then return redis.call('DEL', KEYS[1]) end
+    return 0
+    """
+
+    def __init__(self, connection, owner: str, ttl_s: float = LEASE_TTL_S) -> None:
+        self._redis = connection
+        self.owner = owner
+        self._ttl_ms = int(ttl_s * 1000)
+        self._renew = connection.register_script(self._RENEW)
+        self._release = connection.register_script(self._RELEASE)
+
+    @staticmethod
+    def key(study_id: str) -> str:
+        return f"demcal:lease:{study_id}"
+
+    def acquire(self, study_id: str) -> bool:
+        return bool(self._redis.set(self.key(study_id), self.owner, nx=True, px=self._ttl_ms))
+
+    def renew(self, study_id: str) -> bool:
+        """Extend a lease we hold, or take it back if it vanished (Redis flushed)."""
+        return bool(self._renew(keys=[self.key(study_id)], args=[self.owner, self._ttl_ms]))
+
+    def release(self, study_id: str) -> None:
+        self._release(keys=[self.key(study_id)], args=[self.owner])
+
+    def holder(self, study_id: str) -> str | None:
+        value = self._redis.get(self.key(study_id))
+        return value.decode() if isinstance(value, bytes) else value
+
+
+class LocalLeases:
+    """Leases when there is no Redis: the embedded mode has one serve process, which holds all."""
+
+    def __init__(self, owner: str) -> None:
+        self.owner = owner
+
+    def acquire(self, study_id: str) -> bool:
+        return True
+
+    def renew(self, study_id: str) -> bool:
+        return True
+
+    def release(self, study_id: str) -> None:
+        return None
+
+
+class _Routed:
+    """The executor as the driver sees it: outcomes of single simulations are kept aside for
+    the service, so that the driver (which records whatever it polls as trials) never sees them."""
+
+    def __init__(self, executor: Executor, store: SqlStore) -> None:
+        self.executor = executor
+        self._store = store
+        self.simulation_outcomes: list[TrialOutcome] = []
+
+    def submit(self, specs: Sequence[TrialSpec]) -> None:
+        self.executor.submit(specs)
+
+    def poll(self, timeout: float = 0.0) -> list[TrialOutcome]:
+        trials = []
+        for outcome in self.executor.poll(timeout):
+            if self._is_simulation(outcome.trial_id):
+                self.simulation_outcomes.append(outcome)
+            else:
+                trials.append(outcome)
+        return trials
+
+    def in_flight(self) -> set[str]:
+        return self.executor.in_flight()
+
+    def cancel(self, trial_ids: Sequence[str]) -> None:
+        self.executor.cancel(trial_ids)
+
+    def close(self) -> None:
+        self.executor.close()
+
+    def _is_simulation(self, trial_id: str) -> bool:
+        try:
+            self._store.get_simulation(trial_id)
+        except NotFoundError:
+            return False
+        return True
+
+
+class StudyService:
+    """Advances studies and single simulations in a background thread; see the module docstring."""
+
+    def __init__(
+        self,
+        store: SqlStore,
+        executor: Executor,
+        leases: RedisLeases | LocalLeases,
+        *,
+        poll_s: float = 0.5,
+        scan_every_s: float = 5.0,
+        reconcile_every_s: float = 30.0,
+    ) -> None:
+        self.store = store
+        self.executor = executor
+        self.leases = leases
+        self.poll_s = poll_s
+        self.scan_every_s = scan_every_s
+        self.reconcile_every_s = reconcile_every_s
+        self._routed = _Routed(executor, store)
+        self.driver = Driver(store, self._routed, reconcile_every_s=reconcile_every_s)
+        self.held: set[str] = set()
+        self._last_scan = -float("inf")
+        self._last_reconcile = -float("inf")
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # -- life cycle ---------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self.run, name="demcal-service", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 30.0) -> None:
+        """Finish the current tick, release the leases and close the executor."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        for study_id in list(self.held):
+            self._drop(study_id)
+        self.executor.close()
+
+    def run(self) -> None:
+        logger.info("service %s: driving studies", self.leases.owner)
+        while not self._stop.is_set():
+            try:
+                self.tick()
+            except Exception:  # a database or Redis outage must not end the loop; retry later
+                logger.exception("service: tick failed; retrying in %.0f s", self.scan_every_s)
+                self._stop.wait(self.scan_every_s)
+
+    # -- one pass -----------------------------------------------------------------------------
+
+    def tick(self) -> None:
+        """Bounded work: lease bookkeeping, one step per held study, single simulations."""
+        now = time.monotonic()
+        if now - self._last_scan >= self.scan_every_s:
+            self._last_scan = now
+            self._scan()
+        self._renew()
+        if now - self._last_reconcile >= self.reconcile_every_s:
+            self._last_reconcile = now
+            self._reconcile_simulations()
+        self._submit_simulations()
+        if self.held:
+            share = self.poll_s / len(self.held)
+            for study_id in sorted(self.held):
+                progress = self.driver.step(study_id, timeout=share)
+                if not progress.active and progress.trials_in_flight == 0:
+                    logger.info("study %s: %s; releasing it", study_id, progress.status)
+                    self._drop(study_id)
+        else:
+            self._routed.simulation_outcomes.extend(self._routed.poll(self.poll_s))
+        self._record_simulations()
+
+    def _scan(self) -> None:
+        """Take leases of active studies nobody drives; let go of studies that stopped."""
+        maintain = getattr(self.executor, "maintain", None)
+        if maintain is not None:
+            maintain()
+        active = set(self.store.studies_in(ACTIVE_STUDIES))
+        stopping = set(self.store.studies_in(STOPPING_STUDIES))
+        for study_id in sorted(active - self.held):
+            if self.leases.acquire(study_id):
+                logger.info("study %s: now driven by %s", study_id, self.leases.owner)
+                self._watch(study_id)
+                self.held.add(study_id)
+        for study_id in sorted(stopping & self.held):
+            self.driver.step(study_id, timeout=0)  # withdraws its queued and running trials
+            self._drop(study_id)
+
+    def _renew(self) -> None:
+        for study_id in sorted(self.held):
+            if not self.leases.renew(study_id):
+                logger.warning("study %s: lease lost to another service; no longer driving it", study_id)
+                self.held.discard(study_id)
+                self._unwatch(study_id)
+
+    def _drop(self, study_id: str) -> None:
+        self.held.discard(study_id)
+        self.leases.release(study_id)
+        self._unwatch(study_id)
+
+    def _watch(self, study_id: str) -> None:
+        watch = getattr(self.executor, "watch", None)
+        if watch is not None:
+            watch([study_id])
+
+    def _unwatch(self, study_id: str) -> None:
+        unwatch = getattr(self.executor, "unwatch", None)
+        if unwatch is not None:
+            unwatch(study_id)
+
+    # -- single simulations -------------------------------------------------------------------
+
+    def _submit_simulations(self) -> None:
+        specs = [
+            spec
+            for spec in self.store.pending_simulations()
+            if self.store.mark_simulation_queued(spec.trial_id)
+        ]
+        if specs:
+            self._watch("")  # single simulations are the study-less specs
+            self.executor.submit(specs)
+            logger.info("queued %d single simulations", len(specs))
+
+    def _record_simulations(self) -> None:
+        outcomes, self._routed.simulation_outcomes = self._routed.simulation_outcomes, []
+        for outcome in outcomes:
+            self.store.record_simulation_result(outcome.trial_id, outcome.result, outcome.worker)
+
+    def _reconcile_simulations(self) -> None:
+        """Simulations the database has in flight but the executor lost go back to pending."""
+        with self.store.session() as session:
+            in_db = list(
+                session.scalars(
+                    sa.select(SimulationRow.id).where(
+                        SimulationRow.state.in_([TrialState.QUEUED.value, TrialState.RUNNING.value])
+                    )
+                )
+            )
+        if not in_db:
+            return
+        self._watch("")
+        lost = sorted(set(in_db) - self.executor.in_flight())
+        if lost:
+            logger.info("re-submitting %d single simulations the executor does not know", len(lost))
+            self.store.requeue_simulations(lost)
+
+
+def build_executor(settings: Settings) -> Any:
+    """The RQ executor when ``DEMCAL_REDIS_URL`` is set, else the local process pool."""
+    if settings.redis_url:
+        from worker.rq_executor import RqExecutor
+
+        return RqExecutor.from_url(settings.redis_url, settings.queue_name)
+    from worker.local import LocalPoolExecutor
+
+    return LocalPoolExecutor(workers=settings.workers or None)
+
+
+def build_service(settings: Settings, store: SqlStore, **options: Any) -> StudyService:
+    """The service for ``demcal serve``: executor and leases chosen from the settings."""
+    executor = build_executor(settings)
+    owner = owner_id()
+    if settings.redis_url:
+        leases: RedisLeases | LocalLeases = RedisLeases(executor.connection, owner)
+    else:
+        leases = LocalLeases(owner)
+    return StudyService(store, executor, leases, **options)
