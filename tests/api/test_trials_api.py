@@ -1,0 +1,134 @@
+"""A finished study read over HTTP: trial pages and filters, incremental polling, the Pareto front,
+the per-generation summary (Fig. 5), the recommendation and the exports."""
+
+from __future__ import annotations
+
+import csv
+import io
+import statistics
+
+import pytest
+
+from optimizer.driver import Driver
+from optimizer.memory import SyntheticExecutor
+from optimizer.study import StudyDefinition
+from tests.api.conftest import study_definition
+
+
+@pytest.fixture
+def finished(store, keys):
+    """A study of 6 + 3 x 2 individuals run to completion by the real driver on synthetic results."""
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 6, "offspring": 3, "generations": 2}, seed=5)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="alice")
+    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    return study_id
+
+
+def test_trial_list_pages_and_filters(client, keys, finished):
+    url = f"/api/v1/studies/{finished}/trials"
+
+    everything = client.get(url, params={"limit": 100}, headers=keys.auth()).json()
+    page = client.get(url, params={"limit": 5, "offset": 10}, headers=keys.auth()).json()
+    generation_1 = client.get(url, params={"generation": 1}, headers=keys.auth()).json()
+    pareto = client.get(url, params={"pareto": True}, headers=keys.auth()).json()
+
+    assert everything["total"] == 12
+    assert len(page["items"]) == 2
+    assert {item["generation"] for item in generation_1["items"]} == {1}
+    assert generation_1["total"] == 3
+    assert pareto["total"] >= 1 and all(item["pareto"] for item in pareto["items"])
+    first = everything["items"][0]
+    plotted = {"params", "n_remaining", "wall_time_s", "cost", "f1", "f2", "generation", "pareto", "status"}
+    assert plotted <= set(first)
+    assert first["f1"] is not None
+
+
+def test_polling_with_updated_since_returns_only_changed_trials(client, keys, store, finished):
+    from dataclasses import replace
+
+    from optimizer.protocols import trial_id
+
+    url = f"/api/v1/studies/{finished}/trials"
+    first = client.get(url, headers=keys.auth()).json()
+    template = store.trials(finished)[0].spec
+    changed = trial_id(finished, 99, 0)
+    store.add_trials([replace(template, trial_id=changed, individual=99, generation=3)])
+
+    later = client.get(url, params={"updated_since": first["server_time"]}, headers=keys.auth()).json()
+
+    assert [item["id"] for item in later["items"]] == [changed]
+
+
+def test_one_trial_has_its_full_result(client, keys, store, finished):
+    trial = store.trials(finished)[0]
+
+    response = client.get(f"/api/v1/studies/{finished}/trials/{trial.spec.trial_id}", headers=keys.auth())
+    missing = client.get(f"/api/v1/studies/{finished}/trials/nope", headers=keys.auth())
+
+    assert response.status_code == 200
+    assert response.json()["result"]["n_remaining"] == trial.result.n_remaining
+    assert missing.status_code == 404
+
+
+def test_pareto_front_lists_the_flagged_trials_best_f1_first(client, keys, store, finished):
+    flagged = {row.id for row in store.pareto_rows(finished)}
+
+    front = client.get(f"/api/v1/studies/{finished}/pareto", headers=keys.auth()).json()
+
+    assert {point["id"] for point in front["points"]} == flagged
+    f1 = [point["f1"] for point in front["points"]]
+    assert f1 == sorted(f1)
+    assert front["generation"] == 3
+
+
+def test_generation_summary_gives_median_and_spread_per_generation(client, keys, store, finished):
+    n_t_gen0 = [r.result.n_remaining for r in store.trials(finished) if r.spec.generation == 0]
+
+    summary = client.get(f"/api/v1/studies/{finished}/generations", headers=keys.auth()).json()
+
+    assert [g["generation"] for g in summary] == [0, 1, 2]
+    assert [g["trials"] for g in summary] == [6, 3, 3]
+    assert summary[0]["n_remaining"]["median"] == statistics.median(n_t_gen0)
+    assert summary[0]["n_remaining"]["min"] == min(n_t_gen0)
+    wall = summary[0]["wall_time_s"]
+    assert wall["q1"] <= wall["median"] <= wall["q3"]
+
+
+def test_recommendation_and_equivalent_sets_are_within_tolerance(client, keys, store, finished):
+    body = client.get(f"/api/v1/studies/{finished}/recommendation", headers=keys.auth()).json()
+
+    assert body["recommendation"] == store.load_study(finished).recommendation
+    assert all(point["f1"] <= 0.5 for point in body["equivalent"])
+    f2 = [point["f2"] for point in body["equivalent"]]
+    assert f2 == sorted(f2)
+
+
+def test_exports_hold_every_trial(client, keys, finished):
+    csv_response = client.get(f"/api/v1/studies/{finished}/export.csv", headers=keys.auth())
+    json_response = client.get(f"/api/v1/studies/{finished}/export.json", headers=keys.auth())
+
+    rows = list(csv.DictReader(io.StringIO(csv_response.text)))
+    assert csv_response.headers["content-type"].startswith("text/csv")
+    assert len(rows) == 12
+    assert {"E", "nu", "e", "mu", "n_remaining", "f1", "f2", "pareto"} <= set(rows[0])
+    assert len(json_response.json()["trials"]) == 12
+    assert json_response.json()["study"]["id"] == finished
+
+
+def test_study_progress_counts_done_trials_and_best(client, keys, finished):
+    body = client.get(f"/api/v1/studies/{finished}", headers=keys.auth()).json()
+    trials = client.get(f"/api/v1/studies/{finished}/trials", headers=keys.auth()).json()["items"]
+
+    assert body["status"] == "done"
+    assert body["progress"]["trials_done"] == body["progress"]["trials_total"] == 12
+    assert body["best"]["f1"] == min(item["f1"] for item in trials)
+
+
+def test_metrics_count_studies_trials_and_seconds(client, keys, store, finished):
+    text = client.get("/metrics", headers=keys.auth()).text
+
+    assert 'demcal_studies{status="done"} 1' in text
+    assert 'demcal_trials{state="done"} 12' in text
+    assert "demcal_simulation_seconds_total " in text
