@@ -6,7 +6,9 @@ Algorithm (inscribed spheres, greedy surface cover):
 2. Candidate centres approximate the medial axis: for every sample ``p`` with inward normal ``n``
    the shrinking-ball iteration (Ma, Bae, Choi & Rusinkiewicz, 2012, "3D medial axis point
    approximation using nearest neighbors and the normal field") shrinks the ball tangent at ``p``
-   until no other sample lies inside it. Each candidate's radius is then the exact distance from
+   until no other sample lies inside it. A grid along the principal axes supplies the deepest
+   points where the samples miss them (where several medial sheets meet, as at a cube's centre).
+   Each candidate's radius is then the exact distance from
    its centre to the mesh (point-triangle distances, with the inside test by the generalised
    winding number), so every sphere is inscribed: it never bulges out of the mesh. Candidates
    smaller than ``min_radius_fraction`` of the largest inscribed sphere are dropped (tiny spheres
@@ -185,6 +187,23 @@ def _medial_candidates(points: np.ndarray, normals: np.ndarray, size: float) -> 
     return points + radius[:, None] * inward
 
 
+def _grid_candidates(mesh: trimesh.Trimesh, count: int = 1000) -> np.ndarray:
+    """About ``count`` points on a grid along the principal axes, centred on the box that bounds
+    the mesh in that frame, with an odd number of points per axis so that the centre plane of a
+    slab (where its largest inscribed spheres sit) is always on the grid."""
+    _, axes = np.linalg.eigh(mesh.moment_inertia)
+    local = (mesh.vertices - mesh.centroid) @ axes
+    low, high = local.min(axis=0), local.max(axis=0)
+    spacing = float(np.prod(high - low) / count) ** (1.0 / 3.0)
+    half_counts = np.floor(0.5 * (high - low) / spacing).astype(int)
+    axes_points = [
+        0.5 * (lo + hi) + spacing * np.arange(-n, n + 1)
+        for lo, hi, n in zip(low, high, half_counts, strict=True)
+    ]
+    grid = np.stack(np.meshgrid(*axes_points, indexing="ij"), axis=-1).reshape(-1, 3)
+    return mesh.centroid + grid @ axes.T
+
+
 def _greedy_cover(
     gaps: np.ndarray, n_spheres: int | None, tolerance: float | None
 ) -> tuple[list[int], np.ndarray]:
@@ -234,6 +253,13 @@ def _fit_spheres(
     points, normals = _surface_samples(work, _N_COVER_SAMPLES, seed)
     centres = _medial_candidates(points, normals, size)
     depth = signed_distance(work, centres)
+    grid = _grid_candidates(work)
+    grid_depth = signed_distance(work, grid)
+    # Grid points only where they are deeper than every medial ball (a cube's centre): elsewhere
+    # the medial balls are better, because each touches the surface and so pins the envelope to
+    # the outline.
+    deeper = grid_depth > depth.max() * 1.005
+    centres, depth = np.vstack([centres, grid[deeper]]), np.concatenate([depth, grid_depth[deeper]])
     keep = depth > 0
     if not keep.any():
         raise ClumpError("no interior point found; the mesh is too thin or inside-out")

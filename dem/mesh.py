@@ -214,14 +214,16 @@ def validate_mesh(
         trimesh.repair.fix_winding(mesh)
         warnings.append("made the face winding consistent")
         repaired = True
-    if mesh.volume < 0:
-        trimesh.repair.fix_inversion(mesh)
-        warnings.append("flipped inward-facing normals")
-        repaired = True
-
-    volume = float(mesh.volume)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # trimesh divides by the volume for the centre of mass; a flat mesh is reported below.
+        if mesh.volume < 0:
+            trimesh.repair.fix_inversion(mesh)
+            warnings.append("flipped inward-facing normals")
+            repaired = True
+        volume = float(mesh.volume)
+        is_volume = bool(mesh.is_volume)
     # Relative threshold: a closed but flat sheet has a volume of rounding noise only.
-    if not volume > 1e-9 * size**3 or not mesh.is_volume:
+    if not volume > 1e-9 * size**3 or not is_volume:
         raise MeshGeometryError(
             f"mesh encloses no volume ({volume:.3g} m^3): it is flat, inside-out or self-overlapping; "
             "export a closed solid"
