@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "api.commands.apikey",
     "api.commands.worker",
     "api.commands.serve",
+    "api.commands.calibrate",
 )
 
 app = typer.Typer(
