@@ -1,0 +1,11 @@
+"""Numba compilation flags for every kernel of the engine, kept in one place (as PySDM does).
+
+``cache=True`` writes compiled kernels next to the sources so that a worker process pays the JIT
+compile once per installation, not once per simulation. ``fastmath`` stays off: reassociation
+would make results depend on the compiler's choices and break determinism across runs.
+This module must not import anything heavier than the standard library.
+"""
+
+from __future__ import annotations
+
+JIT_FLAGS = dict(cache=True, fastmath=False, error_model="numpy", boundscheck=False)

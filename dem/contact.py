@@ -1,0 +1,248 @@
+r"""The contact law: every formula that turns an overlap into a force lives here, once.
+
+Notation of the paper (Kawamura et al., Mater. Trans. 62 (2021) 551, eq. 1-2): E Young's modulus,
+nu Poisson's ratio, e restitution coefficient, mu friction coefficient, D contact diameter,
+S_n overlap (here ``delta``), m mass.
+
+Normal force (paper eq. 1, linear spring-dashpot, Cundall & Strack 1979)::
+
+    F_n = K delta + C d(delta)/dt,   F_n >= 0 (never attractive)
+
+* Body stiffness ``k_i = E_i D_i``; two bodies in contact combine in series,
+  ``K = k_a k_b / (k_a + k_b)``, so two identical spheres of diameter D give ``K = E D / 2``
+  exactly as in eq. 1.
+* Walls have no size of their own: a wall is the mirror image of the body that touches it
+  (contact size = the body's ``D``) with the wall's own E, so ``K_wall = D E_b E_w / (E_b + E_w)``,
+  which for the same material is the stiffness of two identical bodies, ``E D / 2``.
+* Damping ``C = 2 zeta sqrt(K m*)`` with ``m* = m_a m_b / (m_a + m_b)`` (``m*`` = the body's mass
+  against a wall). For two identical spheres this is the paper's ``eta sqrt(m E D)`` term.
+  Without the no-attraction clamp the damping ratio giving restitution e is
+  ``eta = -ln e / sqrt(pi^2 + ln^2 e)`` (Tsuji et al. 1992). With the clamp the body leaves the
+  contact when the force (not the overlap) reaches zero, which raises the realised restitution
+  (e = 0.1 would rebound with 0.25). ``damping_ratio(e)`` therefore solves
+  ``restitution_with_clamp(zeta) = e`` on the closed-form solution of the damped oscillator
+  (Schwager & Poeschel, Phys. Rev. E 75 (2007) 051304); below e = 0.135 this needs zeta > 1.
+
+Tangential force (paper eq. 2 plus an elastic stage): an incremental spring with history
+(Cundall & Strack 1979). The spring elongation ``xi`` is rotated into the current tangent plane
+every step (keeping its length), incremented by ``v_t dt``, and::
+
+    F_t = -K_t xi - C_t v_t,   |F_t| <= mu F_n (Coulomb; on sliding xi is reset to match),
+    K_t / K_n = 2 (1 - nu) / (2 - nu)   (Mindlin's ratio; gives nu its physical role),
+    C_t = 2 zeta sqrt(K_t m*).
+
+Clumps (the resolution rule). A rigid body touches another body (or one planar wall facet)
+through several of its spheres at once. The body's stiffness must not depend on how many spheres
+represent it, so ``K`` and ``C`` above belong to the *body pair* (computed from the bodies'
+contact diameters ``Clump.equivalent_diameter``) and are shared among the simultaneous sphere
+contacts of that pair with weights ``w_k = delta_k / sum_j delta_j``. A face landing flat with
+n equal overlaps then carries exactly ``K delta + C d(delta)/dt`` in total, for any n, and a new
+sphere contact enters with zero weight, so forces stay continuous in time. Friction is capped
+per sphere contact, ``|F_t,k| <= mu F_n,k``, so the pair's total friction is ``mu`` times its
+total normal force.
+
+This module must not know about neighbour lists, bodies or walls: it maps one sphere contact's
+kinematics to a force.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numba
+
+from dem.conf import JIT_FLAGS
+
+# The clamp-corrected damping ratio for e -> 0 grows without bound; past this the contact is a
+# pure dashpot for all practical purposes (realised e ~ 1 / (4 zeta^2) = 2.5e-5).
+_MAX_DAMPING_RATIO = 100.0
+
+
+class ContactParamsError(ValueError):
+    """A contact parameter is outside its physical range; the message names the field."""
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """A material's contact parameters, the four numbers the calibration searches."""
+
+    E: float  # Young's modulus, Pa
+    nu: float  # Poisson's ratio
+    e: float  # coefficient of restitution
+    mu: float  # Coulomb friction coefficient
+
+    def __post_init__(self) -> None:
+        for name in ("E", "nu", "e", "mu"):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise ContactParamsError(f"{name} must be a finite number, got {value!r}")
+        if self.E <= 0:
+            raise ContactParamsError(f"E (Young's modulus) must be > 0 Pa, got {self.E}")
+        if not -1.0 < self.nu < 0.5:
+            raise ContactParamsError(f"nu (Poisson's ratio) must be in (-1, 0.5), got {self.nu}")
+        if not 0.0 < self.e <= 1.0:
+            raise ContactParamsError(f"e (restitution) must be in (0, 1], got {self.e}")
+        if self.mu < 0:
+            raise ContactParamsError(f"mu (friction) must be >= 0, got {self.mu}")
+
+    @property
+    def damping_ratio(self) -> float:
+        """zeta that makes a binary impact rebound with ``e`` despite the no-attraction clamp."""
+        return damping_ratio(self.e)
+
+    @property
+    def tangential_ratio(self) -> float:
+        """K_t / K_n."""
+        return tangential_stiffness_ratio(self.nu)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"E": float(self.E), "nu": float(self.nu), "e": float(self.e), "mu": float(self.mu)}
+
+
+def body_stiffness(E: float, D: float) -> float:
+    """k_i = E_i D_i: one body's share of the normal stiffness (N/m)."""
+    return E * D
+
+
+def series(k_a: float, k_b: float) -> float:
+    """Two springs (or masses) in series: k_a k_b / (k_a + k_b)."""
+    return k_a * k_b / (k_a + k_b)
+
+
+def normal_stiffness(E_a: float, D_a: float, E_b: float, D_b: float) -> float:
+    """K of a body pair; E D / 2 for identical bodies (paper eq. 1)."""
+    return series(body_stiffness(E_a, D_a), body_stiffness(E_b, D_b))
+
+
+def wall_stiffness(E_body: float, D_body: float, E_wall: float) -> float:
+    """K of a body against a wall: the wall is the body's mirror image made of the wall's E."""
+    return normal_stiffness(E_body, D_body, E_wall, D_body)
+
+
+def tangential_stiffness_ratio(nu: float) -> float:
+    """K_t / K_n = 2 (1 - nu) / (2 - nu) (Mindlin)."""
+    return 2.0 * (1.0 - nu) / (2.0 - nu)
+
+
+def damping_ratio_linear(e: float) -> float:
+    """eta = -ln e / sqrt(pi^2 + ln^2 e): the ratio for restitution e when forces may attract."""
+    if e >= 1.0:
+        return 0.0
+    log_e = math.log(e)
+    return -log_e / math.sqrt(math.pi**2 + log_e**2)
+
+
+def restitution_with_clamp(zeta: float) -> float:
+    """Restitution of a linear spring-dashpot impact that ends when the force reaches zero.
+
+    Closed form of x'' + 2 zeta x' + x = 0, x(0) = 0, x'(0) = 1 (unit frequency and speed): the
+    contact ends at t* where x'' = 0 and e = -x'(t*).
+    """
+    if zeta <= 0.0:
+        return 1.0
+    if abs(zeta - 1.0) < 1e-7:
+        zeta = 1.0 - 1e-7  # the critical case is the continuous limit of both branches
+    if zeta < 1.0:
+        wd = math.sqrt(1.0 - zeta * zeta)
+        phase = math.pi - math.atan2(2.0 * zeta * wd, 1.0 - 2.0 * zeta * zeta)
+        return math.exp(-zeta * phase / wd) * (zeta / wd * math.sin(phase) - math.cos(phase))
+    root = math.sqrt(zeta * zeta - 1.0)
+    r1, r2 = -zeta + root, -zeta - root
+    t_end = 2.0 * math.log(r2 / r1) / (r1 - r2)
+    return -(r1 * math.exp(r1 * t_end) - r2 * math.exp(r2 * t_end)) / (r1 - r2)
+
+
+def contact_time_with_clamp(zeta: float) -> float:
+    """Duration (in units of 1/omega_0) of a clamped impact: from first touch until F_n = 0."""
+    if zeta <= 0.0:
+        return math.pi
+    if abs(zeta - 1.0) < 1e-7:
+        zeta = 1.0 - 1e-7
+    if zeta < 1.0:
+        wd = math.sqrt(1.0 - zeta * zeta)
+        return (math.pi - math.atan2(2.0 * zeta * wd, 1.0 - 2.0 * zeta * zeta)) / wd
+    root = math.sqrt(zeta * zeta - 1.0)
+    r1, r2 = -zeta + root, -zeta - root
+    return 2.0 * math.log(r2 / r1) / (r1 - r2)
+
+
+@lru_cache(maxsize=1024)
+def damping_ratio(e: float) -> float:
+    """zeta with ``restitution_with_clamp(zeta) == e``, by bisection (the map is monotone)."""
+    if e >= 1.0:
+        return 0.0
+    if e <= restitution_with_clamp(_MAX_DAMPING_RATIO):
+        return _MAX_DAMPING_RATIO
+    lo, hi = 0.0, _MAX_DAMPING_RATIO
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if restitution_with_clamp(mid) > e:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-15 * max(hi, 1.0):
+            break
+    return 0.5 * (lo + hi)
+
+
+@numba.njit(**JIT_FLAGS)
+def sphere_contact_force(nx, ny, nz, delta, vx, vy, vz, weight, k_n, c_n, k_t, c_t, mu, hist, h, hist_dt):
+    """Force on the first partner of one sphere contact; returns (fx, fy, fz, f_normal).
+
+    ``n`` points from the second partner to the first, ``v`` is the first partner's velocity
+    relative to the second at the contact point, ``weight`` the contact's share of the body
+    pair's ``k_n, c_n, k_t, c_t``. ``hist[h]`` is the tangential spring elongation, updated in
+    place with the time increment ``hist_dt`` (0 re-evaluates forces without advancing history).
+    """
+    v_n = vx * nx + vy * ny + vz * nz
+    f_n = weight * (k_n * delta - c_n * v_n)
+    if f_n < 0.0:
+        f_n = 0.0
+
+    vtx = vx - v_n * nx
+    vty = vy - v_n * ny
+    vtz = vz - v_n * nz
+    # Rotate the stored elongation into the current tangent plane, keeping its length.
+    sx = hist[h, 0]
+    sy = hist[h, 1]
+    sz = hist[h, 2]
+    old_len2 = sx * sx + sy * sy + sz * sz
+    if old_len2 > 0.0:
+        s_n = sx * nx + sy * ny + sz * nz
+        sx -= s_n * nx
+        sy -= s_n * ny
+        sz -= s_n * nz
+        new_len2 = sx * sx + sy * sy + sz * sz
+        if new_len2 > 0.0:
+            scale = math.sqrt(old_len2 / new_len2)
+            sx *= scale
+            sy *= scale
+            sz *= scale
+    sx += vtx * hist_dt
+    sy += vty * hist_dt
+    sz += vtz * hist_dt
+
+    kt = weight * k_t
+    ct = weight * c_t
+    ftx = -kt * sx - ct * vtx
+    fty = -kt * sy - ct * vty
+    ftz = -kt * sz - ct * vtz
+    ft2 = ftx * ftx + fty * fty + ftz * ftz
+    f_max = mu * f_n
+    if ft2 > f_max * f_max:
+        if ft2 > 0.0:
+            scale = f_max / math.sqrt(ft2)
+            ftx *= scale
+            fty *= scale
+            ftz *= scale
+        # Sliding: the spring holds exactly the elongation that the capped force implies.
+        if kt > 0.0:
+            sx = -(ftx + ct * vtx) / kt
+            sy = -(fty + ct * vty) / kt
+            sz = -(ftz + ct * vtz) / kt
+    hist[h, 0] = sx
+    hist[h, 1] = sy
+    hist[h, 2] = sz
+    return f_n * nx + ftx, f_n * ny + fty, f_n * nz + ftz, f_n
