@@ -46,6 +46,7 @@ import numba
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
 
 from dem.clump import Clump
 from dem.conf import JIT_FLAGS
@@ -230,9 +231,11 @@ def clump_fit(mesh: trimesh.Trimesh, centres: np.ndarray, radius: np.ndarray, *,
     """Gap and bulge of spheres (``centres`` in the mesh's coordinates) against the mesh surface."""
     points, _ = _surface_samples(mesh, _N_ERROR_SAMPLES, seed)
     points = np.vstack([points, mesh.vertices])
-    surplus = np.full(len(points), np.inf)
-    for c, r in zip(centres, radius, strict=True):
-        surplus = np.minimum(surplus, np.linalg.norm(points - c, axis=1) - r)
+    # Chunks keep the points x spheres matrix small when a fine tolerance made many spheres.
+    chunk = max(1, 2_000_000 // max(1, len(radius)))
+    surplus = np.concatenate(
+        [(cdist(points[i : i + chunk], centres) - radius).min(axis=1) for i in range(0, len(points), chunk)]
+    )
     gap = np.maximum(surplus, 0.0)
     # A surface point inside a sphere means that sphere crosses the surface there, by at least this.
     bulge = float(max(0.0, -surplus.min()))
@@ -248,7 +251,10 @@ def _fit_spheres(
 ) -> tuple[np.ndarray, np.ndarray]:
     work = mesh
     if len(mesh.faces) > WORKING_FACES:
-        work = decimate(mesh, target_faces=WORKING_FACES)
+        try:
+            work = decimate(mesh, target_faces=WORKING_FACES)
+        except MeshError as exc:
+            logger.info("fitting on the full mesh (%d faces): %s", len(mesh.faces), exc)
     size = float(np.linalg.norm(work.extents))
     points, normals = _surface_samples(work, _N_COVER_SAMPLES, seed)
     centres = _medial_candidates(points, normals, size)
@@ -273,9 +279,7 @@ def _fit_spheres(
     centres, radius = centres[unique], radius[unique]
 
     cover = np.vstack([points, work.vertices])
-    gaps = np.empty((len(centres), len(cover)), dtype=np.float32)
-    for j in range(len(centres)):
-        gaps[j] = np.linalg.norm(cover - centres[j], axis=1) - radius[j]
+    gaps = (cdist(centres, cover) - radius[:, None]).astype(np.float32)
     chosen, current = _greedy_cover(gaps, n_spheres, tolerance)
     if tolerance is not None and current.max() > tolerance:
         raise ClumpError(

@@ -268,6 +268,7 @@ def decimate(
         return mesh.copy()
     simplified = mesh.simplify_quadric_decimation(face_count=target)
     simplified.merge_vertices()
+    _remove_fins(simplified)
     if not simplified.is_watertight:
         trimesh.repair.fill_holes(simplified)
     if not simplified.is_watertight:
@@ -277,6 +278,16 @@ def decimate(
     trimesh.repair.fix_normals(simplified)
     logger.info("decimated mesh from %d to %d faces", n_faces, len(simplified.faces))
     return simplified
+
+
+def _remove_fins(mesh: trimesh.Trimesh) -> None:
+    """Drop back-to-back face pairs (same three vertices, opposite winding): the quadric
+    simplifier leaves such zero-volume fins on noisy scans, and they make an edge non-manifold."""
+    _, group, counts = np.unique(np.sort(mesh.faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    single = counts[group.ravel()] == 1
+    if not single.all():
+        mesh.update_faces(single)
+        mesh.remove_unreferenced_vertices()
 
 
 def mass_properties(

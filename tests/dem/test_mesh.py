@@ -152,6 +152,19 @@ def test_decimation_keeps_volume_within_two_percent_and_watertight():
     assert coarse.volume == pytest.approx(4.0 / 3.0 * np.pi * 0.05**3, rel=0.02)
 
 
+def test_decimating_a_noisy_scan_leaves_no_pinched_edges():
+    # Noise like a structured-light scan's makes the simplifier leave back-to-back face pairs.
+    scan = trimesh.creation.icosphere(subdivisions=5, radius=0.04)
+    scan.vertices *= [1.6, 1.0, 0.5]
+    scan.vertices += np.random.default_rng(2).normal(0.0, 2e-4, scan.vertices.shape)
+
+    coarse = decimate(scan, target_faces=3000)
+
+    assert coarse.is_watertight
+    assert len(coarse.faces) <= 3000
+    assert coarse.volume == pytest.approx(scan.volume, rel=0.01)
+
+
 def test_box_mass_properties_equal_the_analytic_ones():
     a, b, c, mass = 0.146, 0.071, 0.008, 0.17
     box = trimesh.creation.box((a, b, c))
