@@ -11,19 +11,32 @@ from __future__ import annotations
 import logging
 
 import sqlalchemy as sa
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from fastapi.responses import JSONResponse
 
 from api import __version__
+from api.dashboard import dashboard_router
 from api.db import check_schema_current, create_db_engine
+from api.deps import reject_unknown_query
 from api.errors import PayloadTooLargeError, install_error_handlers
 from api.routes import health, metrics, shapes, simulations, studies, trials
+from api.schemas import ErrorDetail
 from api.settings import Settings
 from api.store import SqlStore
 
 log = logging.getLogger(__name__)
 
 UPLOAD_PATH = "/api/v1/shapes"
+ERROR_RESPONSES = {
+    status: {"model": ErrorDetail, "description": description}
+    for status, description in (
+        (401, "No API key, an unknown one, or a revoked one."),
+        (404, "No such object, or it belongs to another owner."),
+        (409, "The object's state forbids this request."),
+        (413, "The request body is larger than the configured limit."),
+        (422, "The request is invalid; the message says what to fix."),
+    )
+}
 MULTIPART_OVERHEAD = 64 * 1024  # form fields and boundaries around the mesh file
 
 
@@ -85,8 +98,14 @@ def create_app(settings: Settings, engine: sa.Engine | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.store = SqlStore(engine)
     install_error_handlers(app)
-    for module in (studies, trials, simulations, shapes, health, metrics):
-        app.include_router(module.router)
+    strict_query = [Depends(reject_unknown_query)]
+    for module in (studies, trials, simulations, shapes, metrics):
+        app.include_router(module.router, responses=ERROR_RESPONSES, dependencies=strict_query)
+    app.include_router(
+        health.router, responses={413: ERROR_RESPONSES[413], 422: ERROR_RESPONSES[422]},
+        dependencies=strict_query,
+    )
+    app.include_router(dashboard_router(), responses=ERROR_RESPONSES)
     app.add_middleware(
         BodySizeLimit,
         max_request_bytes=settings.max_request_bytes,

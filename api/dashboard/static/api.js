@@ -1,0 +1,185 @@
+// The dashboard's one door to the JSON API: the API key (kept in localStorage, sent as a bearer
+// token, exactly as any other client would), fetch with error reporting, and small formatters.
+// Pages import from here; nothing here knows about a particular page.
+
+const KEY_STORAGE = "demcal.apiKey";
+export const API = document.body.dataset.api || "/api/v1";
+
+export function apiKey() {
+  return localStorage.getItem(KEY_STORAGE) || "";
+}
+
+export class ApiError extends Error {
+  constructor(status, message) {
+    super(message);
+    this.status = status;
+  }
+}
+
+// FastAPI puts the reason in "detail": a string, or a list of validation errors.
+function detailText(body, fallback) {
+  if (!body || body.detail === undefined) return fallback;
+  if (typeof body.detail === "string") return body.detail;
+  if (Array.isArray(body.detail)) {
+    return body.detail.map((d) => `${(d.loc || []).join(".")}: ${d.msg}`).join("\n");
+  }
+  return JSON.stringify(body.detail);
+}
+
+// `path` is relative to the API prefix unless `root` is set (the dashboard's own JSON routes).
+export async function api(path, { method = "GET", body, headers = {}, raw = false, root = false } = {}) {
+  const init = { method, headers: { Accept: "application/json", ...headers } };
+  const key = apiKey();
+  if (key) init.headers.Authorization = `Bearer ${key}`;
+  if (body !== undefined) {
+    if (typeof body === "string") {
+      init.body = body;
+    } else {
+      init.body = JSON.stringify(body);
+      init.headers["Content-Type"] = "application/json";
+    }
+  }
+  const response = await fetch(root ? path : API + path, init);
+  if (!response.ok) {
+    let parsed = null;
+    try { parsed = await response.json(); } catch { /* not JSON: keep the status text */ }
+    const message = detailText(parsed, `${response.status} ${response.statusText}`);
+    if (response.status === 401 || response.status === 403) showKeyProblem(message);
+    throw new ApiError(response.status, message);
+  }
+  if (raw) return response;
+  if (response.status === 204) return null;
+  return response.json();
+}
+
+// A list endpoint may answer a bare array or a page object; pages only want the items.
+export function itemsOf(body) {
+  return Array.isArray(body) ? body : (body.items || []);
+}
+
+export function showBanner(message, kind = "error") {
+  const banner = document.getElementById("banner");
+  banner.textContent = message;
+  banner.className = `banner ${kind}`;
+  banner.hidden = false;
+}
+
+export function clearBanner() {
+  document.getElementById("banner").hidden = true;
+}
+
+function showKeyProblem(message) {
+  showBanner(
+    apiKey()
+      ? `The API refused the saved key: ${message}. Paste a valid key (demcal apikey create) above.`
+      : "This dashboard reads the API with an API key: paste one (from `demcal apikey create`) in the box above.",
+    "error",
+  );
+}
+
+function setupKeyForm() {
+  const form = document.getElementById("key-form");
+  const input = document.getElementById("api-key");
+  const state = document.getElementById("key-state");
+  const describe = () => { state.textContent = apiKey() ? "key saved" : "no key"; };
+  describe();
+  form.addEventListener("submit", (event) => {
+    event.preventDefault();
+    const value = input.value.trim();
+    if (value) localStorage.setItem(KEY_STORAGE, value);
+    else localStorage.removeItem(KEY_STORAGE);
+    input.value = "";
+    describe();
+    window.location.reload();
+  });
+}
+setupKeyForm();
+
+// Repeat `task` every `ms` while the tab is visible; a failing poll shows a banner and retries.
+// Returns a function that stops it (also when a run is in flight when it is called).
+export function poll(task, ms) {
+  let timer = null;
+  let stopped = false;
+  const run = async () => {
+    try {
+      const keepGoing = await task();
+      if (keepGoing === false) return;
+    } catch (error) {
+      if (!(error instanceof ApiError)) console.error(error);
+      showBanner(`Could not refresh: ${error.message}`);
+    }
+    if (!stopped) timer = setTimeout(run, document.hidden ? ms * 5 : ms);
+  };
+  run();
+  return () => { stopped = true; clearTimeout(timer); };
+}
+
+// The experiment's target with the study's own rule (optimizer/study.py Experiment.target).
+export function targetOf(definition) {
+  const exp = definition?.experiment;
+  if (!exp?.measured?.length) return NaN;
+  const v = [...exp.measured].sort((a, b) => a - b);
+  const mid = Math.floor(v.length / 2);
+  let value = (exp.aggregate || "median") === "mean"
+    ? v.reduce((a, b) => a + b, 0) / v.length
+    : (v.length % 2 ? v[mid] : (v[mid - 1] + v[mid]) / 2);
+  const rule = exp.round || "half_up";
+  if (rule === "half_up") value = Math.floor(value + 0.5);
+  else if (rule === "half_even") {
+    const floor = Math.floor(value);
+    const diff = value - floor;
+    value = diff > 0.5 || (diff === 0.5 && floor % 2 === 1) ? floor + 1 : floor;
+  }
+  return value;
+}
+
+// ---- formatting -----------------------------------------------------------------------------
+
+export function fmt(value, digits = 3) {
+  if (value === null || value === undefined || Number.isNaN(value)) return "–";
+  if (typeof value !== "number") return String(value);
+  if (!Number.isFinite(value)) return value > 0 ? "∞" : "−∞";
+  const magnitude = Math.abs(value);
+  if (magnitude !== 0 && (magnitude >= 1e5 || magnitude < 1e-3)) return value.toExponential(digits - 1);
+  return Number(value.toPrecision(digits)).toString();
+}
+
+export function fmtTime(iso) {
+  if (!iso) return "–";
+  const date = new Date(iso);
+  if (Number.isNaN(date.getTime())) return iso;
+  return date.toLocaleString(undefined, { dateStyle: "medium", timeStyle: "short" });
+}
+
+export function fmtSeconds(s) {
+  if (s === null || s === undefined) return "–";
+  if (s < 120) return `${fmt(s, 3)} s`;
+  if (s < 7200) return `${fmt(s / 60, 3)} min`;
+  return `${fmt(s / 3600, 3)} h`;
+}
+
+export const PARAMETERS = [
+  { key: "E", label: "E", unit: "Pa", title: "Young's modulus E (Pa)", log: true },
+  { key: "nu", label: "ν", unit: "–", title: "Poisson's ratio ν (–)", log: false },
+  { key: "e", label: "e", unit: "–", title: "restitution e (–)", log: false },
+  { key: "mu", label: "μ", unit: "–", title: "friction μ (–)", log: false },
+];
+
+export function el(tag, attrs = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [name, value] of Object.entries(attrs)) {
+    if (value === undefined || value === null) continue;
+    if (name === "class") node.className = value;
+    else if (name === "text") node.textContent = value;
+    else node.setAttribute(name, value);
+  }
+  for (const child of children) {
+    if (child === null || child === undefined) continue;
+    node.append(child instanceof Node ? child : document.createTextNode(String(child)));
+  }
+  return node;
+}
+
+export function statusBadge(status) {
+  return el("span", { class: `status ${status || ""}`, text: status || "–" });
+}

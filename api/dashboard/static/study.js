@@ -1,0 +1,217 @@
+// The study page: header and progress, the Pareto front, the paper's Fig. 5 generation plot,
+// parameters by generation, the recommendation, and the pause/resume/cancel/export buttons.
+// Trials are loaded once, then polled incrementally with ?updated_since= (only what changed)
+// and upserted by id, so a running study costs one small request every few seconds.
+
+import {
+  ApiError, PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, itemsOf, poll,
+  showBanner, statusBadge, targetOf,
+} from "./api.js";
+import { CONFIG, X_AXES, generationFigure, paretoFigure, parameterFigure } from "./plots.js";
+
+const studyId = document.getElementById("study").dataset.studyId;
+const base = `/studies/${encodeURIComponent(studyId)}`;
+const PAGE = 5000; // the API's largest page: a 10,000-trial study loads in two requests
+const POLL_MS = 3000;
+const TERMINAL = new Set(["done", "cancelled", "failed"]);
+
+const trials = new Map();
+let study = null;
+let cursor = null; // server_time of the last page: the next poll asks only for newer changes
+let recommendationGeneration = -1;
+
+async function loadTrialChanges() {
+  const since = cursor;
+  let offset = 0;
+  let changed = 0;
+  let serverTime = null;
+  for (;;) {
+    const query = new URLSearchParams({ limit: PAGE, offset });
+    if (since) query.set("updated_since", since);
+    const page = await api(`${base}/trials?${query}`);
+    serverTime = serverTime || page.server_time;
+    for (const t of itemsOf(page)) trials.set(t.id, t);
+    changed += page.items.length;
+    offset += page.items.length;
+    if (!page.items.length || offset >= page.total) break;
+  }
+  cursor = serverTime;
+  return changed;
+}
+
+function renderHeader() {
+  document.getElementById("study-name").textContent = study.name || study.id;
+  document.title = `${study.name || study.id} · demcal`;
+  const status = document.getElementById("study-status");
+  status.replaceWith(Object.assign(statusBadge(study.status), { id: "study-status" }));
+  const p = study.progress;
+  const def = study.definition || {};
+  const facts = [
+    ["Study id", study.id],
+    ["Progress", `${p.trials_done} / ${p.trials_total} trials`],
+    ["Generation", `${p.generation} of ${p.generations_total}`],
+    ["Target N_t", `${fmt(targetOf(def))} items (tolerance ±${fmt(def.experiment?.tolerance ?? NaN)})`],
+    ["Measured N_t", (def.experiment?.measured || []).join(", ")],
+    ["Objective f2", def.objective_time === "wall" ? "wall time T (s)" : "cost (machine-independent)"],
+    ["Created", fmtTime(study.created_at)],
+    ["Updated", fmtTime(study.updated_at)],
+  ];
+  const dl = document.getElementById("study-facts");
+  dl.replaceChildren(...facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
+  if (study.message) dl.append(el("dt", { text: "Message" }), el("dd", { text: study.message }));
+  const share = p.trials_total ? (100 * p.trials_done) / p.trials_total : 0;
+  document.getElementById("progress-bar").style.width = `${Math.min(100, share)}%`;
+  const s = study.status;
+  document.getElementById("btn-pause").disabled = !(s === "running" || s === "created");
+  document.getElementById("btn-resume").disabled = s !== "paused";
+  document.getElementById("btn-cancel").disabled = TERMINAL.has(s);
+}
+
+function maxGeneration() {
+  const planned = study?.progress?.generations_total ?? 0;
+  let seen = 0;
+  for (const t of trials.values()) seen = Math.max(seen, t.generation);
+  return Math.max(planned, seen);
+}
+
+function renderPlots() {
+  const list = [...trials.values()];
+  const xKey = document.getElementById("pareto-x").value;
+  const gmax = maxGeneration();
+  const pareto = paretoFigure(list, xKey, gmax);
+  Plotly.react("pareto-plot", pareto.data, pareto.layout, CONFIG);
+  const caption = document.getElementById("pareto-caption");
+  const pending = pareto.hidden;
+  caption.textContent =
+    `${pareto.data[0].x.length} finished trials, coloured by generation; ` +
+    `${pareto.data[1].x.length} Pareto members are outlined diamonds. Click a point to open its trial.` +
+    (pending ? ` ${pending} trials not shown (not finished yet, or failed without objectives).` : "");
+  const gen = generationFigure(list, targetOf(study.definition), gmax);
+  Plotly.react("generation-plot", gen.data, gen.layout, CONFIG);
+  const par = parameterFigure(list, study.definition?.parameters || {}, gmax);
+  Plotly.react("parameter-plot", par.data, par.layout, CONFIG);
+}
+
+function paramCells(params) {
+  return PARAMETERS.map((p) => el("td", { class: "num", text: fmt(params?.[p.key], 4) }));
+}
+
+async function renderRecommendation() {
+  const body = await api(`${base}/recommendation`);
+  const box = document.getElementById("recommendation");
+  const rec = body.recommendation;
+  if (!rec) {
+    box.replaceChildren(el("p", { class: "muted", text:
+      TERMINAL.has(body.status) ? "No parameter set matched the experiment within tolerance."
+        : "No recommendation yet: it appears once a trial matches the experiment within tolerance." }));
+  } else {
+    const params = rec.params || {};
+    const rows = PARAMETERS.map((p) => [p.title, fmt(params[p.key], 4)]);
+    for (const [key, label] of [["n_remaining", "N_t (items)"], ["f1", "f1 (items)"],
+      ["wall_time_s", "T (s)"], ["cost", "cost"]]) {
+      if (rec[key] !== undefined && rec[key] !== null) rows.push([label, fmt(rec[key], 4)]);
+    }
+    const trialId = rec.trial_id || rec.id || (rec.trial_ids || [])[0];
+    const dl = el("dl", { class: "facts" }, ...rows.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
+    box.replaceChildren(
+      el("p", { text: "The fastest Pareto member whose N_t matches the experiment within tolerance:" }),
+      dl,
+      trialId ? el("p", {}, el("a", { href: `/trials/${encodeURIComponent(trialId)}`, text: `open trial ${trialId}` })) : null,
+    );
+  }
+  const tbody = document.querySelector("#equivalent tbody");
+  const rows = (body.equivalent || []).map((t) => el("tr", {},
+    el("td", {}, el("a", { href: `/trials/${encodeURIComponent(t.id)}`, text: `g${t.generation} · i${t.individual}` })),
+    ...paramCells(t.params),
+    el("td", { class: "num", text: fmt(t.n_remaining) }),
+    el("td", { class: "num", text: fmt(t.wall_time_s) })));
+  tbody.replaceChildren(...(rows.length ? rows
+    : [el("tr", {}, el("td", { colspan: 7, class: "muted", text: "None yet." }))]));
+}
+
+async function refresh() {
+  const first = study === null;
+  study = await api(base);
+  if (first) {
+    // Pareto membership is computed on the study's own f2, so show that axis first.
+    document.getElementById("pareto-x").value =
+      study.definition?.objective_time === "wall" ? "wall_time_s" : "cost";
+  }
+  renderHeader();
+  const changed = await loadTrialChanges();
+  if (changed) renderPlots();
+  if (changed || study.progress.generation !== recommendationGeneration) {
+    await renderRecommendation();
+    recommendationGeneration = study.progress.generation;
+  }
+  clearBanner();
+  // Keep polling a finished study only until one quiet round has confirmed the last changes.
+  return !(TERMINAL.has(study.status) && changed === 0);
+}
+
+async function act(action) {
+  try {
+    study = await api(`${base}/${action}`, { method: "POST" });
+    renderHeader();
+  } catch (error) {
+    showBanner(`Could not ${action} the study: ${error.message}`);
+  }
+}
+
+async function exportAs(format) {
+  try {
+    const response = await api(`${base}/export.${format}`, { raw: true });
+    const blob = await response.blob();
+    const link = el("a", { href: URL.createObjectURL(blob), download: `${studyId}-trials.${format}` });
+    document.body.append(link);
+    link.click();
+    link.remove();
+    setTimeout(() => URL.revokeObjectURL(link.href), 10000);
+  } catch (error) {
+    showBanner(`Could not export: ${error.message}`);
+  }
+}
+
+function wire() {
+  document.getElementById("btn-pause").addEventListener("click", () => act("pause"));
+  document.getElementById("btn-resume").addEventListener("click", () => act("resume"));
+  document.getElementById("btn-cancel").addEventListener("click", () => {
+    if (window.confirm("Cancel this study? Queued and running trials are stopped.")) act("cancel");
+  });
+  document.getElementById("btn-export-csv").addEventListener("click", () => exportAs("csv"));
+  document.getElementById("btn-export-json").addEventListener("click", () => exportAs("json"));
+  document.getElementById("pareto-x").addEventListener("change", () => renderPlots());
+}
+
+// Clicking a trial point (in any plot) opens its trial; customdata[0] is the trial id. Plotly
+// adds .on() to a div at its first draw, so this runs after the first render.
+function bindClicks() {
+  for (const id of ["pareto-plot", "generation-plot", "parameter-plot"]) {
+    const div = document.getElementById(id);
+    if (div.dataset.clickBound) continue;
+    div.dataset.clickBound = "1";
+    div.on("plotly_click", (event) => {
+      const point = event.points?.[0];
+      const trialId = point?.customdata?.[0];
+      if (trialId) window.location.href = `/trials/${encodeURIComponent(trialId)}`;
+    });
+  }
+}
+
+async function start() {
+  wire();
+  if (!apiKey()) {
+    showBanner("Paste an API key (from `demcal apikey create`) in the box above to see this study.", "warn");
+    return;
+  }
+  poll(async () => {
+    const goOn = await refresh();
+    if (trials.size) bindClicks();
+    return goOn;
+  }, POLL_MS);
+}
+
+start().catch((error) => {
+  if (!(error instanceof ApiError)) console.error(error);
+  showBanner(error.message);
+});

@@ -1,0 +1,125 @@
+"""Fixtures for the dashboard's browser tests: the real app (``create_app``, dashboard included)
+on a migrated SQLite file seeded through the real store, served by uvicorn in a thread on a free
+port, and headless Debian Chromium driven by Playwright.
+
+No browser is ever downloaded: Chromium must be ``/usr/bin/chromium`` (Debian's ``chromium``
+package; ``.ci/run`` installs it). Without it the tests skip with a reason, or fail with
+``CI=true``. Screenshots go to ``test-artifacts/`` (gitignored); with
+``DEMCAL_DASHBOARD_SCREENSHOTS=docs`` the tests also refresh the README's ``docs/*.png``.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import _in_ci
+from tests.dashboard.seed import SeededStudy, migrated_store, seed_study, snapshot_run
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+    "--disable-sync",
+    # WebGL (plotly's scattergl, used above 1,500 points) runs on SwiftShader without a GPU.
+    "--enable-unsafe-swiftshader",
+]
+REPO = Path(__file__).resolve().parents[2]
+ARTIFACTS = REPO / "test-artifacts"
+RETAINED_IN_REPLAY = [i % 4 == 0 for i in range(12)]
+
+
+@dataclass
+class Dashboard:
+    base_url: str
+    study: SeededStudy
+
+    def url(self, path: str) -> str:
+        return self.base_url + path
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.fixture(scope="session")
+def dashboard(tmp_path_factory):
+    """The app on a seeded SQLite store, listening on 127.0.0.1:<free port> until the session ends."""
+    import uvicorn
+
+    from api.app import create_app
+    from api.settings import load_settings
+
+    root = tmp_path_factory.mktemp("dashboard")
+    url = f"sqlite:///{root / 'demcal.db'}"
+    store = migrated_store(url)
+    study = seed_study(store)
+    study.replay_trial_id = study.trial_ids[5]
+    snapshots = root / "data" / "snapshots" / study.replay_trial_id
+    snapshot_run(snapshots, len(RETAINED_IN_REPLAY), RETAINED_IN_REPLAY)
+    settings = load_settings(database_url=url, data_dir=root / "data")
+    port = _free_port()
+    config = uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 20
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            pytest.fail("uvicorn did not start the dashboard within 20 s")
+        time.sleep(0.05)
+    yield Dashboard(f"http://127.0.0.1:{port}", study)
+    server.should_exit = True
+    thread.join(timeout=10)
+    store.engine.dispose()
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """Headless Debian Chromium; skipped (failed with CI=true) when it is not installed."""
+    if not CHROMIUM.is_file():
+        reason = f"{CHROMIUM} is missing: install Debian's chromium and chromium-driver (see .ci/run)"
+        if _in_ci():
+            pytest.fail(f"CI=true requires Chromium: {reason}")
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()
+
+
+@pytest.fixture
+def page(browser, dashboard):
+    """A fresh laptop-sized tab whose localStorage holds the seeded owner's API key; page errors
+    are collected in ``page.errors`` so a test can assert there were none."""
+    context = browser.new_context(viewport={"width": 1440, "height": 900})
+    context.add_init_script(f"localStorage.setItem('demcal.apiKey', {dashboard.study.api_key!r})")
+    tab = context.new_page()
+    tab.set_default_timeout(15_000)
+    tab.errors = []
+    tab.on("pageerror", lambda error: tab.errors.append(str(error)))
+    yield tab
+    context.close()
+
+
+def save_screenshot(page, name: str) -> Path:
+    """A full-page PNG under test-artifacts/, and under docs/ when DEMCAL_DASHBOARD_SCREENSHOTS=docs."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    if os.environ.get("DEMCAL_DASHBOARD_SCREENSHOTS") == "docs":
+        page.screenshot(path=str(REPO / "docs" / f"{name}.png"), full_page=True)
+    return path

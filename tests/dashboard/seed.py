@@ -1,0 +1,202 @@
+"""A study with known trials, written through the real SQL store, for the dashboard's browser
+tests, its screenshots and its render benchmark.
+
+The trials are synthetic: parameters drawn per generation from a distribution that narrows
+towards a hidden parameter set, N_t and T from a smooth made-up response (more friction and less
+restitution keep more items; a stiffer contact takes a smaller time step, so a longer run).
+Nothing here pretends to be physics; it only gives the pages data with the shape of a real
+study. The Pareto front is computed here by plain non-dominated filtering, so a test knows how
+many points the page must highlight without trusting the code under test.
+
+``snapshot_run`` writes a replayable snapshot directory with the feeder's own ``SnapshotWriter``
+(the format the replay endpoint reads): items sliding along the real parametric tray, the
+retained ones stopping before the outlet.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from api.auth import create_key
+from api.db import create_db_engine, upgrade_database
+from api.store import SqlStore
+from dem.result import SimulationResult, SimulationStatus
+from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, trial_id
+from optimizer.study import parse_study
+
+MEASURED = [0, 2, 3, 3, 4, 4, 5, 8, 12, 16]
+N_ITEMS = 30
+TOLERANCE = 0.5
+TRUTH = {"logE": 6.3, "nu": 0.3, "e": 0.45, "mu": 0.42}
+
+
+@dataclass
+class SeededStudy:
+    """What was written, so tests can compare the page with it."""
+
+    study_id: str
+    api_key: str
+    trial_ids: list[str]
+    pareto_ids: list[str]
+    replay_trial_id: str | None = None
+    target: float = 4.0
+    f1: dict[str, float] = field(default_factory=dict)
+    n_remaining: dict[str, int] = field(default_factory=dict)
+
+
+def migrated_store(database_url: str) -> SqlStore:
+    upgrade_database(database_url)
+    return SqlStore(create_db_engine(database_url))
+
+
+def non_dominated(points: dict[str, tuple[float, float]]) -> list[str]:
+    """Ids whose (f1, f2) no other point beats in both (ties in both count as non-dominated)."""
+    front = []
+    for key, (a1, a2) in points.items():
+        dominated = any(
+            b1 <= a1 and b2 <= a2 and (b1 < a1 or b2 < a2)
+            for other, (b1, b2) in points.items()
+            if other != key
+        )
+        if not dominated:
+            front.append(key)
+    return front
+
+
+def _response(params: dict[str, float], rng: np.random.Generator) -> tuple[int, float, float]:
+    """Made-up (N_t, T, cost) with noise: N_t is about 4 of 30 at the hidden set and grows with
+    friction, falls with restitution; T grows with the square root of E (the time step)."""
+    logit = (
+        math.log(4 / 26) + 7.0 * (params["mu"] - TRUTH["mu"]) - 3.0 * (params["e"] - TRUTH["e"])
+        + rng.normal(0, 0.35)
+    )
+    n_remaining = int(rng.binomial(N_ITEMS, 1.0 / (1.0 + math.exp(-logit))))
+    steps = 6.0e4 * math.sqrt(params["E"] / 1.0e6)
+    cost = steps * (350 + 20 * n_remaining)
+    wall = cost / 4.0e6 * rng.uniform(0.9, 1.1)
+    return n_remaining, wall, cost
+
+
+def seed_study(
+    store: SqlStore,
+    *,
+    population: int = 20,
+    offspring: int = 8,
+    generations: int = 4,
+    seed: int = 7,
+    owner: str = "alice",
+    name: str = "feeder-calibration",
+) -> SeededStudy:
+    """A finished study with every trial done, objectives and the final Pareto flags stored."""
+    rng = np.random.default_rng(seed)
+    definition = parse_study(
+        {
+            "name": name,
+            "description": "synthetic trials for the dashboard",
+            "scenario": {},
+            "experiment": {"measured": MEASURED},
+            "ga": {"population": population, "offspring": offspring, "generations": generations},
+            "objective_time": "wall",
+        }
+    ).model_dump(mode="json")
+    target = float(np.median(MEASURED))
+    target = math.floor(target + 0.5)
+    with store.session() as session:
+        _, token = create_key(session, owner)
+    study_id = store.create_study(definition, owner=owner)
+    store.set_status(study_id, StudyStatus.RUNNING)
+    objectives: dict[str, tuple[float, float]] = {}
+    params_of: dict[str, dict[str, float]] = {}
+    seeded = SeededStudy(study_id=study_id, api_key=token, trial_ids=[], pareto_ids=[], target=target)
+    individual = 0
+    for generation in range(generations + 1):
+        size = population if generation == 0 else offspring
+        width = 1.0 / (1.0 + generation)  # the search narrows around the truth
+        specs = []
+        for _ in range(size):
+            params = {
+                "E": float(10 ** np.clip(TRUTH["logE"] + rng.normal(0, 1.5 * width), 5, 9)),
+                "nu": float(np.clip(TRUTH["nu"] + rng.normal(0, 0.2 * width), 0.0, 0.49)),
+                "e": float(np.clip(TRUTH["e"] + rng.normal(0, 0.4 * width), 0.05, 0.95)),
+                "mu": float(np.clip(TRUTH["mu"] + rng.normal(0, 0.4 * width), 0.05, 1.0)),
+            }
+            params_of[trial_id(study_id, individual, 0)] = params
+            specs.append(
+                TrialSpec(
+                    trial_id=trial_id(study_id, individual, 0), study_id=study_id, individual=individual,
+                    generation=generation, replicate=0, seed=1000 + individual, params=params,
+                    scenario=definition["scenario"],
+                )
+            )
+            individual += 1
+        store.add_trials(specs)
+        for spec in specs:
+            n_remaining, wall, cost = _response(spec.params, rng)
+            times = [float(t) for t in np.sort(rng.uniform(5.5, 60.0, N_ITEMS - n_remaining))]
+            result = SimulationResult(
+                status=SimulationStatus.OK, n_items=N_ITEMS, n_remaining=n_remaining,
+                discharge_times=times + [None] * n_remaining, sim_time=65.0, wall_time_s=wall,
+                steps=int(cost / 400), dt=65.0 / max(1, int(cost / 400)), cost=cost, params=spec.params,
+                seed=spec.seed,
+            )
+            store.record_result(TrialOutcome(spec.trial_id, result, worker="seed"))
+            f1 = abs(n_remaining - target)
+            objectives[spec.trial_id] = (f1, wall)
+            seeded.f1[spec.trial_id] = f1
+            seeded.n_remaining[spec.trial_id] = n_remaining
+            seeded.trial_ids.append(spec.trial_id)
+        front = non_dominated(objectives)
+        # The paper's rule: the fastest Pareto member that matches the experiment within tolerance.
+        matching = [tid for tid in front if objectives[tid][0] <= TOLERANCE]
+        recommendation = None
+        if matching:
+            best = min(matching, key=lambda tid: objectives[tid][1])
+            recommendation = {"trial_id": best, "params": params_of[best], "f1": objectives[best][0]}
+        store.save_generation(
+            study_id, generation, b"synthetic", front, recommendation,
+            objectives={tid: objectives[tid] for tid in (s.trial_id for s in specs)},
+        )
+        seeded.pareto_ids = front
+    store.set_status(study_id, StudyStatus.DONE)
+    return seeded
+
+
+def snapshot_run(directory: Path, n_items: int, retained: list[bool], frames: int = 60) -> None:
+    """A replayable snapshot directory: boxes moving along the tray, retained ones stopping."""
+    from dem.scenarios.render import SnapshotWriter
+    from dem.scenarios.tray import TrayConfig, parametric_tray_mesh
+
+    tray = TrayConfig()
+    vertices, faces = parametric_tray_mesh(tray)
+    rng = np.random.default_rng(3)
+    half = np.array([0.073, 0.035, 0.005])
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    hulls = [corners * half * rng.uniform(0.8, 1.1) for _ in range(n_items)]
+    writer = SnapshotWriter(
+        directory, vertices, faces, [f"item{i}" for i in range(n_items)], ["smartphone"] * n_items, hulls
+    )
+    start = np.column_stack(
+        [
+            rng.uniform(0.08, 0.22, n_items),
+            rng.uniform(-0.09, 0.09, n_items),
+            rng.uniform(0.01, 0.05, n_items),
+        ]
+    )
+    stop_x = rng.uniform(0.35, 0.48, n_items)
+    yaw = rng.uniform(0, np.pi, n_items)
+    for k in range(frames):
+        t = 65.0 * k / (frames - 1)
+        travel = (tray.length + 0.1 - start[:, 0]) * (k / (frames - 1))
+        x = start[:, 0] + travel * rng.uniform(0.9, 1.3, n_items)
+        x = np.where(retained, np.minimum(x, stop_x), x)
+        y = start[:, 1] * np.clip(1 - 0.8 * (x - 0.25) / 0.25, 0.2, 1.0)
+        pos = np.column_stack([x, y, start[:, 2]])
+        quat = np.column_stack([np.cos(yaw / 2), np.zeros(n_items), np.zeros(n_items), np.sin(yaw / 2)])
+        state = np.where(x > tray.length + 0.05, 2, 1)
+        writer.frame(t, pos, quat, state)
+    times = [None if keep else 30.0 for keep in retained]
+    writer.summary({"discharge_times": times})
