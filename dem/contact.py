@@ -35,11 +35,15 @@ Clumps (the resolution rule). A rigid body touches another body (or one planar w
 through several of its spheres at once. The body's stiffness must not depend on how many spheres
 represent it, so ``K`` and ``C`` above belong to the *body pair* (computed from the bodies'
 contact diameters ``Clump.equivalent_diameter``) and are shared among the simultaneous sphere
-contacts of that pair with weights ``w_k = delta_k / sum_j delta_j``. A face landing flat with
-n equal overlaps then carries exactly ``K delta + C d(delta)/dt`` in total, for any n, and a new
-sphere contact enters with zero weight, so forces stay continuous in time. Friction is capped
-per sphere contact, ``|F_t,k| <= mu F_n,k``, so the pair's total friction is ``mu`` times its
-total normal force.
+contacts k of that pair with weights ``w_k = delta_k^4 / sum_j delta_j^4`` (``share_weight``).
+A face landing flat with n equal overlaps then carries exactly ``K delta + C d(delta)/dt`` in
+total, for any n; a new sphere contact enters with zero weight, so forces stay continuous.
+Why the fourth power: no sharing rule that is monotone and resolution independent can be exactly
+conservative (the only conservative one puts all force on the deepest sphere, the limit of
+``delta^p`` for p -> infinity). With p = 1 an elastic tumbling box gained or lost about 1 % of
+its energy per second through rotating multi-sphere contacts; p = 4 keeps it within 0.2 %
+(test 4) while a flat face still shares its load equally. Friction is capped per sphere contact,
+``|F_t,k| <= mu F_n,k``, so the pair's total friction is ``mu`` times its total normal force.
 
 This module must not know about neighbour lists, bodies or walls: it maps one sphere contact's
 kinematics to a force.
@@ -185,6 +189,13 @@ def damping_ratio(e: float) -> float:
         if hi - lo < 1e-15 * max(hi, 1.0):
             break
     return 0.5 * (lo + hi)
+
+
+@numba.njit(**JIT_FLAGS)
+def share_weight(delta):
+    """Unnormalised share of one sphere contact in its body pair's stiffness: delta^4."""
+    d2 = delta * delta
+    return d2 * d2
 
 
 @numba.njit(**JIT_FLAGS)

@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
-from dem.contact import sphere_contact_force
+from dem.contact import share_weight, sphere_contact_force
 from dem.motion import evaluate_into
 from dem.quaternion import free_rotor_step, to_matrix
 
@@ -50,7 +50,8 @@ N_PAR = 20
 W_E, W_ZETA, W_MU, W_KT = 0, 1, 2, 3
 # Layout of the integer counters ``cnt``.
 C_STEPS, C_BUILDS, C_NEED_PP, C_NEED_WP, C_EVENTS, C_BAD_BODY, C_PP, C_WP, C_GROUPS, C_MIDSTEP = range(10)
-N_CNT = 10
+C_CONTACTS = 10  # force-carrying sphere contacts at the last step
+N_CNT = 11
 # Layout of the float clock ``clk``: time, accumulated cost.
 K_T, K_COST = 0, 1
 
@@ -521,7 +522,7 @@ def compute_forces(
             return STATUS_UNSTABLE_OVERLAP, n_contacts
         pp_delta[p] = delta
         pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = dx / d, dy / d, dz / d
-        grp_sum[pp_group[p]] += delta
+        grp_sum[pp_group[p]] += share_weight(delta)
     for p in range(n_pp):
         delta = pp_delta[p]
         if delta <= 0.0:
@@ -547,7 +548,7 @@ def compute_forces(
         k_t = kt_ratio * k_n
         c_n = 2.0 * zeta * math.sqrt(k_n * m_eff)
         c_t = 2.0 * zeta * math.sqrt(k_t * m_eff)
-        weight = delta / grp_sum[pp_group[p]]
+        weight = share_weight(delta) / grp_sum[pp_group[p]]
         fx, fy, fz, _ = sphere_contact_force(
             nx, ny, nz, delta, vx, vy, vz, weight, k_n, c_n, k_t, c_t, mu, pp_hist, p, hist_dt
         )
@@ -651,7 +652,7 @@ def compute_forces(
             facet_sum[wp_f[a]] = 0.0
         for a in range(p, q_end):
             if wp_keep[a]:
-                facet_sum[wp_f[a]] += wp_delta[a]
+                facet_sum[wp_f[a]] += share_weight(wp_delta[a])
         for a in range(p, q_end):
             if not wp_keep[a]:
                 continue
@@ -671,7 +672,7 @@ def compute_forces(
             k_t = wall_mat[w, W_KT] * k_n
             c_n = 2.0 * wall_mat[w, W_ZETA] * math.sqrt(k_n * mass[b])
             c_t = 2.0 * wall_mat[w, W_ZETA] * math.sqrt(k_t * mass[b])
-            weight = delta / facet_sum[f]
+            weight = share_weight(delta) / facet_sum[f]
             fx, fy, fz, _ = sphere_contact_force(
                 nx,
                 ny,
@@ -981,6 +982,7 @@ def run_steps(
         step += 1
         cnt[C_STEPS] = step
         clk[K_COST] += n_active_spheres + n_contacts
+        cnt[C_CONTACTS] = n_contacts
         for b in range(nb):
             if not active[b]:
                 continue

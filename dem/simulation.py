@@ -210,6 +210,11 @@ class Simulation:
         return self._auto_dt
 
     @property
+    def n_contacts(self) -> int:
+        """Sphere contacts (sphere-sphere and sphere-facet) that carried force at the last step."""
+        return int(self._cnt[K.C_CONTACTS])
+
+    @property
     def n_builds(self) -> int:
         """How often the neighbour lists were rebuilt."""
         return int(self._cnt[K.C_BUILDS])

@@ -1,0 +1,159 @@
+"""Rigid clump bodies against analytic mechanics (issue 3, tests 3, 4, 5 and 7).
+
+The box clumps are built here: a regular grid of equal spheres whose envelope is the box, with
+the box's analytic mass and inertia (the engine must take those, never the spheres').
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dem.clump import Clump
+from dem.contact import ContactParams
+from dem.quaternion import from_axis_angle, matrix
+from dem.simulation import Simulation
+from dem.walls import WallMesh
+
+G = 9.81
+
+
+def box_clump(size, radius: float, density: float = 1000.0) -> Clump:
+    """Spheres of ``radius`` on a grid filling a box of ``size`` (each side a multiple of 2 r)."""
+    size = np.asarray(size, dtype=float)
+    counts = np.rint(size / (2 * radius)).astype(int)
+    assert np.allclose(counts * 2 * radius, size), "box sides must be multiples of the sphere diameter"
+    axes = [(np.arange(n) - (n - 1) / 2) * 2 * radius for n in counts]
+    offset = np.array(np.meshgrid(*axes, indexing="ij")).reshape(3, -1).T
+    volume = float(np.prod(size))
+    mass = density * volume
+    a, b, c = size
+    inertia = mass / 12 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
+    return Clump(
+        radius=np.full(len(offset), radius), offset=offset, mass=mass, inertia=inertia, volume=volume
+    )
+
+
+def floor_sim(params, gravity=(0, 0, -G), **kwargs) -> Simulation:
+    sim = Simulation(params, gravity=gravity, domain_min=(-1, -1, -0.5), domain_max=(1, 1, 1), **kwargs)
+    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 2.0))
+    return sim
+
+
+@pytest.mark.parametrize("angle_deg", [15.0, 22.0])
+def test_box_on_incline_below_friction_angle_stays(angle_deg):
+    mu, angle = 0.5, math.radians(angle_deg)
+    assert math.tan(angle) < mu
+    # The incline is the floor with gravity turned by the slope angle (same mechanics).
+    sim = floor_sim(
+        ContactParams(E=1e7, nu=0.3, e=0.3, mu=mu), gravity=(G * math.sin(angle), 0, -G * math.cos(angle))
+    )
+    box = box_clump((0.04, 0.03, 0.01), 0.005)
+    sim.add_body(box, (0, 0, 0.005))
+    sim.run(0.1)  # settle onto the slope
+    x0 = sim.bodies.pos[0, 0]
+
+    report = sim.run(1.1)
+
+    assert report.ok
+    assert abs(sim.bodies.pos[0, 0] - x0) < 1e-4
+
+
+@pytest.mark.parametrize("angle_deg", [32.0, 40.0])
+def test_box_on_incline_above_friction_angle_slides_with_coulomb_acceleration(angle_deg):
+    mu, angle = 0.5, math.radians(angle_deg)
+    assert math.tan(angle) > mu
+    sim = floor_sim(
+        ContactParams(E=1e7, nu=0.3, e=0.3, mu=mu), gravity=(G * math.sin(angle), 0, -G * math.cos(angle))
+    )
+    sim.add_body(box_clump((0.04, 0.03, 0.01), 0.005), (-0.5, 0, 0.005))
+    sim.run(0.1)
+    v0, t0 = sim.bodies.vel[0, 0], sim.t
+
+    sim.run(0.5)
+
+    measured = (sim.bodies.vel[0, 0] - v0) / (sim.t - t0)
+    assert measured == pytest.approx(G * (math.sin(angle) - mu * math.cos(angle)), rel=0.03)
+
+
+def test_tumbling_clump_in_closed_box_conserves_energy_when_elastic_and_frictionless():
+    params = ContactParams(E=1e7, nu=0.3, e=1.0, mu=0.0)
+    sim = Simulation(params, domain_min=(-0.2, -0.2, -0.2), domain_max=(0.2, 0.2, 0.2))
+    sim.add_wall(WallMesh.box((-0.1, -0.1, -0.1), (0.1, 0.1, 0.1), open_top=False))
+    body = box_clump((0.04, 0.02, 0.01), 0.005)
+    sim.add_body(
+        body,
+        (0.01, -0.02, 0.03),
+        quaternion=from_axis_angle((1, 2, 3), 0.7),
+        velocity=(0.8, 0.5, -0.3),
+        omega=(20.0, -35.0, 15.0),
+    )
+    e0 = sim.kinetic_energy() + sim.potential_energy()
+    energies = []
+
+    def between_contacts(s: Simulation) -> None:
+        if s.n_contacts == 0:  # in contact part of the energy is in the springs
+            energies.append(s.kinetic_energy() + s.potential_energy())
+
+    report = sim.run(1.5, chunk_time=10 * sim.dt, on_chunk=between_contacts)
+
+    assert report.ok
+    assert len(energies) > 0.05 * report.steps
+    assert np.max(np.abs(np.array(energies) - e0)) < 0.005 * e0
+
+
+def test_torque_free_asymmetric_body_keeps_angular_momentum():
+    params = ContactParams(E=1e7, nu=0.3, e=0.5, mu=0.5)
+    inertia = np.array([1.0e-6, 2.0e-6, 3.5e-6])
+    body = Clump(radius=np.array([0.01]), offset=np.zeros((1, 3)), mass=0.01, inertia=inertia, volume=4e-6)
+    omega = np.array([3.0, 40.0, 2.0])  # near the unstable intermediate axis: a demanding case
+    sim = Simulation(params, gravity=(0, 0, 0), domain_min=(-1, -1, -1), domain_max=(1, 1, 1), dt=1e-4)
+    q0 = from_axis_angle((0.3, -0.5, 0.8), 1.1)
+    sim.add_body(body, (0, 0, 0), quaternion=q0, omega=omega)
+
+    def angular_momentum(s: Simulation) -> np.ndarray:
+        r = matrix(s.bodies.quat[0])
+        return r @ (inertia * (r.T @ s.bodies.omega[0]))
+
+    l0 = angular_momentum(sim)
+    energy0 = 0.5 * omega @ l0
+
+    report = sim.run(10.0, chunk_time=1.0)
+
+    assert report.steps == 100_000
+    l1 = angular_momentum(sim)
+    assert np.linalg.norm(l1 - l0) <= 1e-6 * np.linalg.norm(l0)
+    assert 0.5 * sim.bodies.omega[0] @ l1 == pytest.approx(energy0, rel=1e-3)
+
+
+def drop_flat(box: Clump, height: float, params: ContactParams):
+    """Static overlap and first rebound height of a box dropped flat from ``height``."""
+    sim = floor_sim(params)
+    half = 0.005
+    sim.add_body(box, (0, 0, half + height))
+    heights = []
+    sim.run(1.0, chunk_time=2e-4, on_chunk=lambda s: heights.append(s.bodies.pos[0, 2] - half))
+    heights = np.array(heights)
+    first_landing = np.argmax(heights < 0)
+    rebound = heights[first_landing:][: np.argmax(heights[first_landing:] > 1e-3) + 200].max()
+    overlap = -(sim.bodies.pos[0, 2] - half)
+    return overlap, rebound
+
+
+def test_box_landing_flat_is_independent_of_clump_resolution():
+    params = ContactParams(E=1e6, nu=0.3, e=0.5, mu=0.5)
+    coarse = box_clump((0.06, 0.04, 0.01), 0.005)  # 24 spheres
+    fine = box_clump((0.06, 0.04, 0.01), 0.0025)  # 192 spheres
+    assert coarse.n_spheres == 24 and fine.n_spheres == 192
+    height = 0.05
+
+    overlap_coarse, rebound_coarse = drop_flat(coarse, height, params)
+    overlap_fine, rebound_fine = drop_flat(fine, height, params)
+
+    static = coarse.mass * G / (params.E * coarse.equivalent_diameter / 2)
+    assert overlap_coarse == pytest.approx(static, rel=0.02)
+    assert overlap_fine == pytest.approx(overlap_coarse, rel=0.10)
+    assert rebound_coarse == pytest.approx(params.e**2 * height, rel=0.10)
+    assert rebound_fine == pytest.approx(rebound_coarse, rel=0.10)
