@@ -30,6 +30,7 @@ UPLOAD_PATH = "/api/v1/shapes"
 ERROR_RESPONSES = {
     status: {"model": ErrorDetail, "description": description}
     for status, description in (
+        (400, "The body cannot be parsed (not UTF-8 JSON, broken multipart)."),
         (401, "No API key, an unknown one, or a revoked one."),
         (404, "No such object, or it belongs to another owner."),
         (409, "The object's state forbids this request."),

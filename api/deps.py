@@ -14,6 +14,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
 from api.auth import Principal, authenticate
+from api.errors import InvalidInputError
 from api.settings import Settings
 from api.store import SqlStore
 
@@ -48,3 +49,20 @@ def require_key(
 
 
 ApiKeyDep = Annotated[Principal, Depends(require_key)]
+
+
+def reject_unknown_query(request: Request) -> None:
+    """A misspelt filter (``?statuss=done``) must not silently return everything: 422 instead."""
+    route = request.scope.get("route")
+    if route is None or not hasattr(route, "dependant"):
+        return
+    known: set[str] = set()
+    pending = [route.dependant]
+    while pending:
+        dependant = pending.pop()
+        known.update(param.alias for param in dependant.query_params)
+        pending.extend(dependant.dependencies)
+    unknown = sorted(set(request.query_params) - known)
+    if unknown:
+        accepted = ", ".join(sorted(known)) or "none"
+        raise InvalidInputError(f"unknown query parameter(s) {', '.join(unknown)}; accepted: {accepted}")

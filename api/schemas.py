@@ -246,6 +246,12 @@ class ShapePage(_Wire):
     offset: int
 
 
+class ErrorDetail(BaseModel):
+    """Every error: a 4xx status and one message that says what to fix."""
+
+    detail: str
+
+
 class Health(BaseModel):
     status: Literal["ok", "degraded"]
     database: str

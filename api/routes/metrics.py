@@ -13,7 +13,7 @@ router = APIRouter(tags=["metrics"])
 
 
 @router.get(
-    "/metrics", response_class=PlainTextResponse,
+    "/metrics",
     responses={200: {"content": {"text/plain": {}}, "description": "Prometheus text format 0.0.4."}},
 )
 def metrics(principal: ApiKeyDep, store: StoreDep, settings: SettingsDep):

@@ -82,7 +82,7 @@ def recommendation(study_id: str, principal: ApiKeyDep, store: StoreDep):
 
 
 @router.get(
-    "/{study_id}/export.csv", response_class=StreamingResponse,
+    "/{study_id}/export.csv",
     responses={200: {"content": {"text/csv": {}}, "description": "One row per trial."}},
 )
 def export_csv(study_id: str, principal: ApiKeyDep, store: StoreDep):
