@@ -15,8 +15,8 @@ import numpy as np
 
 from dem.conf import JIT_FLAGS
 
-# Layout of a motion row: kind, direction (3), amplitude, frequency, start_time, ramp_time.
-MOTION_ROW = 8
+# Layout of a motion row: kind, direction (3), amplitude, frequency, start_time, ramp_time, phase.
+MOTION_ROW = 9
 _STATIC = 0.0
 _SINE = 1.0
 
@@ -27,12 +27,14 @@ class MotionError(ValueError):
 
 @dataclass(frozen=True)
 class SinusoidalTranslation:
-    """d(t) = A s(tau) sin(2 pi f tau) u for tau = t - start_time >= 0, zero before.
+    """d(t) = A s(tau) [sin(2 pi f tau + phase) - sin(phase)] u for tau = t - start_time >= 0,
+    zero before (the offset keeps the wall where it was when the motion starts).
 
     ``amplitude`` A is the peak displacement (m) along the unit vector u (``direction``,
     normalised here). The optional ramp s(tau) = (1 - cos(pi tau / ramp_time)) / 2 grows the
     amplitude smoothly from 0 to A over ``ramp_time`` so that velocity and acceleration start
-    without a jump (a sudden start kicks resting items).
+    without a jump (a sudden start kicks resting items). ``phase = -pi/2`` instead starts at the
+    lowest point with zero velocity, d = A (1 - cos(2 pi f tau)) u.
     """
 
     direction: tuple[float, float, float]
@@ -40,12 +42,15 @@ class SinusoidalTranslation:
     frequency: float
     start_time: float = 0.0
     ramp_time: float = 0.0
+    phase: float = 0.0
 
     def __post_init__(self) -> None:
         direction = np.asarray(self.direction, dtype=np.float64).reshape(-1)
         if direction.shape != (3,) or not np.all(np.isfinite(direction)) or not np.any(direction):
             raise MotionError(f"direction must be a non-zero 3-vector, got {self.direction!r}")
         object.__setattr__(self, "direction", tuple(float(v) for v in direction / np.linalg.norm(direction)))
+        if not math.isfinite(self.phase):
+            raise MotionError(f"phase must be a finite angle in radians, got {self.phase!r}")
         for name in ("amplitude", "frequency", "start_time", "ramp_time"):
             value = getattr(self, name)
             if not math.isfinite(value) or value < 0:
@@ -53,7 +58,15 @@ class SinusoidalTranslation:
 
     def row(self) -> np.ndarray:
         return np.array(
-            [_SINE, *self.direction, self.amplitude, self.frequency, self.start_time, self.ramp_time]
+            [
+                _SINE,
+                *self.direction,
+                self.amplitude,
+                self.frequency,
+                self.start_time,
+                self.ramp_time,
+                self.phase,
+            ]
         )
 
     def displacement(self, t: float) -> np.ndarray:
@@ -109,15 +122,16 @@ def _scalar_state(row, t):
     if tau <= 0.0:
         return 0.0, 0.0, 0.0
     omega = 2.0 * math.pi * freq
-    sin_w = math.sin(omega * tau)
-    cos_w = math.cos(omega * tau)
+    sin_w = math.sin(omega * tau + row[8])
+    cos_w = math.cos(omega * tau + row[8])
+    offset = math.sin(row[8])
     s, ds, dds = 1.0, 0.0, 0.0
     if ramp > 0.0 and tau < ramp:
         k = math.pi / ramp
         s = 0.5 * (1.0 - math.cos(k * tau))
         ds = 0.5 * k * math.sin(k * tau)
         dds = 0.5 * k * k * math.cos(k * tau)
-    d = amp * s * sin_w
-    v = amp * (ds * sin_w + s * omega * cos_w)
-    a = amp * (dds * sin_w + 2.0 * ds * omega * cos_w - s * omega * omega * sin_w)
+    d = amp * s * (sin_w - offset)
+    v = amp * (ds * (sin_w - offset) + s * omega * cos_w)
+    a = amp * (dds * (sin_w - offset) + 2.0 * ds * omega * cos_w - s * omega * omega * sin_w)
     return d, v, a

@@ -1,0 +1,164 @@
+"""Run control (issue 3, test 10 and the driver's contract): determinism, blow-ups end as
+``unstable``, deadline, cancellation, bodies leaving the domain, walls grouped into facets."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from dem.clump import Clump
+from dem.contact import ContactParams
+from dem.simulation import Simulation, SimulationError
+from dem.walls import WallMesh
+
+PARAMS = ContactParams(E=1e6, nu=0.3, e=0.5, mu=0.5)
+
+
+def ball(radius=0.005, density=2500.0) -> Clump:
+    mass = density * 4 / 3 * math.pi * radius**3
+    return Clump(
+        radius=np.array([radius]),
+        offset=np.zeros((1, 3)),
+        mass=mass,
+        inertia=np.full(3, 0.4 * mass * radius**2),
+        volume=4 / 3 * math.pi * radius**3,
+    )
+
+
+def dimer(radius=0.004) -> Clump:
+    offset = np.array([[-0.004, 0, 0], [0.004, 0, 0]])
+    mass = 1000 * 2 * 4 / 3 * math.pi * radius**3
+    return Clump(
+        radius=np.full(2, radius),
+        offset=offset,
+        mass=mass,
+        inertia=np.array([0.4, 1.2, 1.2]) * mass * radius**2,
+        volume=mass / 1000,
+    )
+
+
+def poured_box(seed: int, **kwargs) -> Simulation:
+    sim = Simulation(PARAMS, domain_min=(-0.1, -0.1, -0.1), domain_max=(0.1, 0.1, 0.3), seed=seed, **kwargs)
+    sim.add_wall(WallMesh.box((-0.04, -0.04, 0), (0.04, 0.04, 0.2)))
+    jitter = sim.rng.uniform(-1e-3, 1e-3, size=(40, 3))
+    for k in range(40):
+        x, y, z = (k % 4) * 0.018 - 0.027, (k // 4 % 4) * 0.018 - 0.027, 0.01 + (k // 16) * 0.014
+        sim.add_body(dimer() if k % 2 else ball(), np.array([x, y, z]) + jitter[k])
+    return sim
+
+
+def test_same_inputs_and_seed_give_identical_results():
+    first, second = poured_box(seed=3), poured_box(seed=3)
+
+    report = first.run(0.1)
+    second.run(0.1)
+
+    assert report.ok, report.message
+    assert np.array_equal(first.bodies.pos, second.bodies.pos)
+    assert np.array_equal(first.bodies.quat, second.bodies.quat)
+    assert first.cost == second.cost and first.steps == second.steps
+
+
+def test_absurd_forced_step_ends_unstable_without_exception():
+    sim = poured_box(seed=1, dt=1e-2)
+
+    report = sim.run(0.5)
+
+    assert report.status == "unstable"
+    assert report.t < 0.5
+    assert "unstable at t=" in report.message
+
+
+def test_deadline_in_the_past_times_out_and_cancel_cancels():
+    sim = poured_box(seed=1)
+
+    timed_out = sim.run(0.05, deadline=time.monotonic() - 1)
+    cancelled = sim.run(0.05, chunk_time=0.005, should_stop=lambda: sim.t > 0.01)
+
+    assert timed_out.status == "timeout" and timed_out.steps == 0
+    assert cancelled.status == "cancelled"
+    assert 0.01 < cancelled.t < 0.05
+
+
+def test_body_leaving_the_domain_is_removed_and_reported():
+    sim = Simulation(PARAMS, domain_min=(-0.1, -0.1, -0.1), domain_max=(0.1, 0.1, 0.1))
+    sim.add_body(ball(), (0, 0, 0.0))
+    sim.add_body(ball(), (0.05, 0, 0.0), velocity=(0, 0, 0))
+
+    report = sim.run(0.2, chunk_time=0.01)
+
+    # Free fall from z = 0 reaches z = -0.1 at t = sqrt(2 * 0.1 / g).
+    assert report.ok
+    assert [b for b, _ in sim.removed_out_of_domain] == [0, 1]
+    assert sim.removed_out_of_domain[0][1] == pytest.approx(math.sqrt(0.2 / 9.81), abs=2 * sim.dt)
+    assert not sim.bodies.active.any()
+
+
+def test_removed_body_no_longer_interacts():
+    sim = Simulation(PARAMS, gravity=(0, 0, 0), domain_min=(-1, -1, -1), domain_max=(1, 1, 1))
+    a = sim.add_body(ball(), (0, 0, 0), velocity=(0.5, 0, 0))
+    b = sim.add_body(ball(), (0.02, 0, 0))
+    sim.remove_body(b)
+
+    sim.run(0.1)
+
+    assert sim.bodies.vel[a, 0] == pytest.approx(0.5, rel=1e-12)
+
+
+def test_body_outside_domain_is_refused():
+    sim = Simulation(PARAMS, domain_min=(0, 0, 0), domain_max=(1, 1, 1))
+
+    with pytest.raises(SimulationError, match="outside the domain"):
+        sim.add_body(ball(), (2, 0, 0))
+
+
+def test_coplanar_triangles_form_one_facet_and_a_cube_six():
+    square = WallMesh.plane((0, 0, 0), (0, 0, 1), 1.0)
+    cube = WallMesh.box((0, 0, 0), (1, 1, 1), open_top=False)
+
+    assert square.n_facets == 1
+    assert cube.n_facets == 6
+
+
+def test_sphere_rolling_over_the_shared_edge_of_coplanar_triangles_feels_one_force():
+    # The square's diagonal is a shared edge: a sphere resting on it must have the same overlap
+    # as anywhere else (a double force would halve it).
+    sim = Simulation(PARAMS, domain_min=(-1, -1, -1), domain_max=(1, 1, 1))
+    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 0.2))
+    body = ball()
+    sim.add_body(body, (0.0, 0.0, 0.005))  # on the diagonal
+    sim.add_body(body, (0.05, -0.03, 0.005))  # inside one triangle
+
+    sim.run(0.3)
+
+    static = body.mass * 9.81 / (PARAMS.E * 0.005)
+    overlaps = 0.005 - sim.bodies.pos[:, 2]
+    assert overlaps == pytest.approx([static, static], rel=1e-3)
+
+
+def test_sphere_on_a_convex_edge_of_two_facets_feels_one_force():
+    # A roof ridge along x: two facets meeting at z = 0 with slopes of +-45 degrees. A sphere
+    # balanced on the ridge touches only the edge, which both facets share.
+    vertices = np.array(
+        [
+            [-0.1, -0.1, -0.1],
+            [0.1, -0.1, -0.1],
+            [0.1, 0, 0],
+            [-0.1, 0, 0],
+            [0.1, 0.1, -0.1],
+            [-0.1, 0.1, -0.1],
+        ]
+    )
+    faces = np.array([[0, 1, 2], [0, 2, 3], [3, 2, 4], [3, 4, 5]])
+    sim = Simulation(PARAMS, domain_min=(-1, -1, -1), domain_max=(1, 1, 1))
+    sim.add_wall(WallMesh(vertices, faces))
+    body = ball()
+    sim.add_body(body, (0, 0, 0.005))
+
+    sim.run(0.3)
+
+    assert sim.walls[0].n_facets == 2
+    assert 0.005 - sim.bodies.pos[0, 2] == pytest.approx(body.mass * 9.81 / (PARAMS.E * 0.005), rel=1e-3)
