@@ -1,0 +1,210 @@
+"""Load benchmark of the REST API: 50 concurrent clients read the Pareto front and pages of the
+trial list of a study with 10,000 trials, over loopback, from a uvicorn server in a subprocess.
+
+    python benchmarks/api_load.py                      # SQLite in a temporary directory
+    python benchmarks/api_load.py --database-url postgresql://postgres@127.0.0.1:5432/bench
+    python benchmarks/api_load.py --think-ms 1000      # dashboard-like polling, one request/s/client
+
+Clients run closed-loop by default (each sends its next request as soon as the previous answer
+arrives), which measures the server's capacity; with ``--think-ms`` each client waits between
+requests, which is what 50 open dashboards do. Prints p50/p99 latency per endpoint and req/s.
+Goal: p99 under 50 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import random
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+N_TRIALS = 10_000
+PARETO_SIZE = 40
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def seed_database(url: str) -> tuple[str, str]:
+    """A migrated database with one study of N_TRIALS finished trials; (study id, API key)."""
+    import sqlalchemy as sa
+
+    from api.auth import create_key
+    from api.db import create_db_engine, upgrade_database
+    from api.models import TrialRow, encode_value, utcnow
+    from api.store import SqlStore
+    from optimizer.protocols import trial_id
+    from optimizer.study import StudyDefinition
+
+    upgrade_database(url)
+    engine = create_db_engine(url)
+    store = SqlStore(engine)
+    definition = StudyDefinition.model_validate(
+        {"scenario": {}, "experiment": {"measured": [3, 4, 4, 2, 5]},
+         "ga": {"population": 100, "offspring": 100, "generations": 99}}
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="bench")
+    rng = random.Random(1)
+    now = utcnow()
+    rows = []
+    for i in range(N_TRIALS):
+        n_remaining = rng.randint(0, 30)
+        wall = rng.uniform(20, 400)
+        f1_value, f1_kind = encode_value(abs(n_remaining - 4.0))
+        f2_value, f2_kind = encode_value(wall * 1e6)
+        rows.append(
+            {
+                "id": trial_id(study_id, i, 0), "study_id": study_id, "individual": i, "generation": i // 100,
+                "replicate": 0, "seed": i, "scenario": {},
+                "params": {"E": 10 ** rng.uniform(5, 9), "nu": rng.uniform(0, 0.49),
+                           "e": rng.uniform(0.05, 0.95), "mu": rng.uniform(0.05, 1)},
+                "state": "done", "status": "ok", "n_remaining": n_remaining, "wall_time_s": wall,
+                "cost": wall * 1e6, "dt": 1e-5, "message": "", "worker": "bench", "attempts": 1,
+                "pareto": i < PARETO_SIZE, "f1_value": f1_value, "f1_kind": f1_kind,
+                "f2_value": f2_value, "f2_kind": f2_kind, "created_at": now, "updated_at": now,
+                "finished_at": now,
+                "result": {"status": "ok", "n_remaining": n_remaining, "wall_time_s": wall},
+            }
+        )
+    with store.session() as session:
+        session.execute(sa.insert(TrialRow), rows)
+        _, token = create_key(session, "bench")
+    engine.dispose()
+    return study_id, token
+
+
+def serve(url: str, port: int, workers: int) -> subprocess.Popen:
+    env = dict(os.environ, DEMCAL_DATABASE_URL=url, DEMCAL_LOG_LEVEL="WARNING")
+    code = (
+        "import uvicorn\n"
+        "from api.app import create_app\n"
+        "from api.settings import load_settings\n"
+        "app = create_app(load_settings())\n"
+    )
+    app_dir = tempfile.mkdtemp(prefix="demcal-bench-app-")
+    Path(app_dir, "bench_app.py").write_text(code)
+    return subprocess.Popen(
+        [sys.executable, "-m", "uvicorn", "bench_app:app", "--app-dir", app_dir, "--host", "127.0.0.1",
+         "--port", str(port), "--workers", str(workers), "--log-level", "warning", "--no-access-log"],
+        env=env,
+    )
+
+
+async def wait_ready(base: str, timeout: float = 60.0) -> None:
+    import httpx
+
+    deadline = time.monotonic() + timeout
+    async with httpx.AsyncClient() as client:
+        while time.monotonic() < deadline:
+            try:
+                if (await client.get(f"{base}/healthz")).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            await asyncio.sleep(0.2)
+    raise SystemExit("the server did not become healthy in time")
+
+
+async def load(base: str, study_id: str, token: str, clients: int, seconds: float, think: float) -> dict:
+    import httpx
+
+    headers = {"Authorization": f"Bearer {token}"}
+    latencies: dict[str, list[float]] = {"pareto": [], "trials": []}
+    errors = 0
+    limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
+
+    async def client_loop(index: int, client: httpx.AsyncClient, stop: float) -> None:
+        nonlocal errors
+        rng = random.Random(index)
+        while time.monotonic() < stop:
+            if rng.random() < 0.5:
+                kind, path, params = "pareto", f"/api/v1/studies/{study_id}/pareto", None
+            else:
+                offset = rng.randrange(0, N_TRIALS - 100)
+                kind, path, params = "trials", f"/api/v1/studies/{study_id}/trials", {
+                    "limit": 100, "offset": offset}
+            start = time.perf_counter()
+            response = await client.get(path, params=params, headers=headers)
+            latencies[kind].append(time.perf_counter() - start)
+            if response.status_code != 200:
+                errors += 1
+            if think:
+                await asyncio.sleep(think * rng.uniform(0.5, 1.5))
+
+    async with httpx.AsyncClient(base_url=base, limits=limits, timeout=30) as client:
+        warm_stop = time.monotonic() + 2.0
+        await asyncio.gather(*(client_loop(i, client, warm_stop) for i in range(clients)))
+        latencies = {"pareto": [], "trials": []}
+        started = time.monotonic()
+        stop = started + seconds
+        await asyncio.gather(*(client_loop(i, client, stop) for i in range(clients)))
+        elapsed = time.monotonic() - started
+    return {"latencies": latencies, "elapsed": elapsed, "errors": errors}
+
+
+def _percentile(values: list[float], q: float) -> float:
+    return statistics.quantiles(values, n=100, method="inclusive")[q - 1] if len(values) > 1 else values[0]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--database-url", default=None, help="default: a SQLite file in a temp dir")
+    parser.add_argument("--clients", type=int, default=50)
+    parser.add_argument("--seconds", type=float, default=15.0)
+    parser.add_argument("--think-ms", type=float, default=0.0, help="pause between a client's requests")
+    parser.add_argument("--server-workers", type=int, default=1, help="uvicorn worker processes")
+    args = parser.parse_args()
+
+    workdir = tempfile.mkdtemp(prefix="demcal-bench-")
+    url = args.database_url or f"sqlite:///{workdir}/bench.db"
+    if args.database_url and args.database_url.startswith("postgresql"):
+        import sqlalchemy as sa
+
+        from api.db import create_db_engine
+
+        engine = create_db_engine(args.database_url)
+        with engine.begin() as connection:
+            connection.execute(sa.text("DROP SCHEMA public CASCADE; CREATE SCHEMA public"))
+        engine.dispose()
+    t0 = time.perf_counter()
+    study_id, token = seed_database(url)
+    print(f"seeded {N_TRIALS} trials in {time.perf_counter() - t0:.1f} s ({url.split(':')[0]})")
+
+    port = _free_port()
+    server = serve(url, port, args.server_workers)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        asyncio.run(wait_ready(base))
+        result = asyncio.run(
+            load(base, study_id, token, args.clients, args.seconds, args.think_ms / 1000.0)
+        )
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+    everything = [v for values in result["latencies"].values() for v in values]
+    mode = "closed loop" if not args.think_ms else f"think time {args.think_ms:g} ms"
+    print(f"{args.clients} clients, {mode}, {args.server_workers} server worker(s), "
+          f"{result['elapsed']:.1f} s")
+    for kind, values in [*result["latencies"].items(), ("all", everything)]:
+        print(
+            f"  {kind:7s} n={len(values):6d}  p50={_percentile(values, 50) * 1000:7.1f} ms  "
+            f"p99={_percentile(values, 99) * 1000:7.1f} ms"
+        )
+    print(f"  throughput {len(everything) / result['elapsed']:.0f} req/s, errors {result['errors']}")
+
+
+if __name__ == "__main__":
+    main()
