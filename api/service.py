@@ -128,7 +128,7 @@ class _Routed:
     def poll(self, timeout: float = 0.0) -> list[TrialOutcome]:
         trials = []
         for outcome in self.executor.poll(timeout):
-            if self._is_simulation(outcome.trial_id):
+            if self.is_simulation(outcome.trial_id):
                 self.simulation_outcomes.append(outcome)
             else:
                 trials.append(outcome)
@@ -143,7 +143,7 @@ class _Routed:
     def close(self) -> None:
         self.executor.close()
 
-    def _is_simulation(self, trial_id: str) -> bool:
+    def is_simulation(self, trial_id: str) -> bool:
         try:
             self._store.get_simulation(trial_id)
         except NotFoundError:
@@ -231,6 +231,7 @@ class StudyService:
         maintain = getattr(self.executor, "maintain", None)
         if maintain is not None:
             maintain()
+        self._mark_running()
         active = set(self.store.studies_in(ACTIVE_STUDIES))
         stopping = set(self.store.studies_in(STOPPING_STUDIES))
         for study_id in sorted(active - self.held):
@@ -241,6 +242,17 @@ class StudyService:
         for study_id in sorted(stopping & self.held):
             self.driver.step(study_id, timeout=0)  # withdraws its queued and running trials
             self._drop(study_id)
+
+    def _mark_running(self) -> None:
+        """Show which trials a worker has started (queued -> running) and on which worker."""
+        running = getattr(self.executor, "running", None)
+        if running is None:
+            return
+        for trial_id, worker in running().items():
+            if self._routed.is_simulation(trial_id):
+                self.store.mark_simulation_running(trial_id, worker)
+            else:
+                self.store.mark_running(trial_id, worker)
 
     def _renew(self) -> None:
         for study_id in sorted(self.held):
@@ -317,7 +329,10 @@ def build_service(settings: Settings, store: SqlStore, **options: Any) -> StudyS
     executor = build_executor(settings)
     owner = owner_id()
     if settings.redis_url:
-        leases: RedisLeases | LocalLeases = RedisLeases(executor.connection, owner)
+        leases: RedisLeases | LocalLeases = RedisLeases(executor.connection, owner, settings.lease_ttl_s)
     else:
         leases = LocalLeases(owner)
+    options.setdefault("reconcile_every_s", settings.reconcile_interval_s)
+    # A replica scans for studies whose lease expired a few times per lease period.
+    options.setdefault("scan_every_s", min(5.0, settings.lease_ttl_s / 3))
     return StudyService(store, executor, leases, **options)

@@ -41,6 +41,12 @@ class Settings(BaseSettings):
         Path("demcal-data"), description="Where results, snapshots, shapes and the clump cache live."
     )
     queue_name: str = Field("demcal", description="Name of the RQ queue the service posts trials to.")
+    reconcile_interval_s: float = Field(
+        30.0, gt=0, le=3600, description="Seconds between checks that queued trials are still queued."
+    )
+    lease_ttl_s: float = Field(
+        30.0, ge=2, le=3600, description="Seconds before a dead `demcal serve`'s studies go to another."
+    )
     workers: int = Field(0, ge=0, le=512, description="Local worker processes; 0 means one per core.")
     host: str = Field("127.0.0.1", description="Address `demcal serve` binds to.")
     port: int = Field(8000, ge=1, le=65535, description="Port `demcal serve` listens on.")

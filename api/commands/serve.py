@@ -45,6 +45,7 @@ def register(app: typer.Typer) -> None:
                 port=port or settings.port,
                 log_config=None,  # keep demcal's one-line log format
                 log_level=settings.log_level.lower(),
+                access_log=settings.log_level == "DEBUG",  # one line per request only when asked
                 timeout_graceful_shutdown=10,
             )
         finally:
