@@ -52,8 +52,9 @@ def register(app: typer.Typer) -> None:
         from api.settings import get_settings
 
         settings = get_settings()
+        definition = None if resume else _load(study_file)
         store = _open_store(settings.database_url)
-        study_id = _resume(store, resume) if resume else _create(store, study_file)
+        study_id = _resume(store, resume) if resume else _create(store, definition)
         _run(store, study_id, workers if workers is not None else settings.workers, results)
 
 
@@ -66,15 +67,18 @@ def _open_store(database_url: str):
     return SqlStore(create_db_engine(database_url))
 
 
-def _create(store, study_file: Path | None) -> str:
+def _load(study_file: Path | None):
     from optimizer.study import StudyDefinitionError, load_study_file
 
     if study_file is None:
         _fail("give a study file (e.g. examples/study-quick.toml) or --resume STUDY_ID")
     try:
-        definition = load_study_file(study_file)
+        return load_study_file(study_file)
     except StudyDefinitionError as exc:
         _fail(str(exc))
+
+
+def _create(store, definition) -> str:
     study_id = store.create_study(definition.model_dump(mode="json"), None)
     typer.echo(
         f"study {study_id} ({definition.name}): up to {definition.total_simulations()} simulations, "
