@@ -125,7 +125,9 @@ def run_liggghts(executable: str, steps: int) -> float | None:
         Path(tmp, "atoms.data").write_text("\n".join(lines) + "\n")
         Path(tmp, "in.bench").write_text(LIGGGHTS_INPUT.format(steps=steps))
         start = time.perf_counter()
-        done = subprocess.run([executable, "-in", "in.bench"], cwd=tmp, capture_output=True, text=True)
+        done = subprocess.run(
+            [executable, "-in", "in.bench"], cwd=tmp, capture_output=True, text=True, errors="replace"
+        )
         wall = time.perf_counter() - start
         if done.returncode != 0:
             print("LIGGGHTS failed:", done.stdout[-2000:], done.stderr[-2000:])

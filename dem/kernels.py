@@ -10,13 +10,15 @@ Scheme (velocity Verlet as in LIGGGHTS, with the free-rotor splitting for rotati
     F, T <- gravity + contacts (``dem.contact.sphere_contact_force``)
     v += dt/2 F/m;  L += dt/2 T
 
-Neighbour lists: a cell grid (cell size = largest sphere diameter + skin, counting sort) finds
-sphere pairs of different bodies closer than r_i + r_j + skin, and sphere-facet pairs closer than
-r + skin. Lists are rebuilt only when 2 max|dx_sphere| > skin or max|dx_sphere| + max|dx_wall|
-> skin. Sphere pairs are ordered by (body a, body b, sphere i, sphere j), so each body pair's
-sphere contacts are contiguous (the resolution rule of ``dem/contact.py`` shares the pair's
-stiffness among them); sphere-facet pairs by (sphere, facet). Tangential history lives in an
-array parallel to each list and is carried across rebuilds by merging the two sorted lists.
+Neighbour lists: a cell grid over the spheres' bounding box (cells at least the largest sphere
+diameter + skin, counting sort) finds sphere pairs of different bodies closer than
+r_i + r_j + skin, and sphere-facet pairs closer than r + skin. Lists are rebuilt only when
+2 max|dx_sphere| > skin; sphere-facet pairs of a moving wall are found with an extra margin of
+twice its amplitude, so wall motion never forces a rebuild. Sphere pairs are ordered by
+(body a, body b, sphere i, sphere j), so each body pair's sphere contacts are contiguous (the
+resolution rule of ``dem/contact.py`` shares the pair's stiffness among them); sphere-facet pairs
+by (sphere, facet). Tangential history lives in an array parallel to each list and is carried
+across rebuilds by merging the two sorted lists.
 
 Nothing here allocates per step; arrays come from ``dem/simulation.py`` which also decides
 what a status code means. The kernels never raise for physics: they return a status.
@@ -44,8 +46,9 @@ STATUS_CAPACITY = 4  # a neighbour list needs more room; the driver grows it and
 P_E, P_ZETA, P_MU, P_KT, P_SKIN, P_OVERLAP, P_VMAX = 0, 1, 2, 3, 4, 5, 6
 P_GX, P_GY, P_GZ = 7, 8, 9
 P_LO, P_HI = 10, 13  # domain bounds (3 each)
-P_CELL_LO, P_CELL_H = 16, 19
-N_PAR = 20
+P_CELL_LO, P_CELL_H = 16, 19  # the grid of the last build (written by the kernel)
+P_CELL_MIN = 20  # smallest cell size: largest sphere diameter + skin
+N_PAR = 21
 # Layout of the per-wall material rows ``wall_mat``.
 W_E, W_ZETA, W_MU, W_KT = 0, 1, 2, 3
 # Layout of the integer counters ``cnt``.
@@ -138,8 +141,28 @@ def _pair_before(ba, bb, i, j, ca, cb, k, m):
 
 @numba.njit(**JIT_FLAGS)
 def _fill_cells(ns, x, sbody, active, par, dims, cell_start, cell_items, sphere_cell):
-    n_cells = dims[0] * dims[1] * dims[2]
-    h = par[P_CELL_H]
+    """Counting sort of the spheres into a grid over their bounding box (not the domain, which
+    may be mostly empty), with cells enlarged if the box needs more cells than allocated."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for s in range(ns):
+        if active[sbody[s]]:
+            for k in range(3):
+                lo[k] = min(lo[k], x[s, k])
+                hi[k] = max(hi[k], x[s, k])
+    h = par[P_CELL_MIN]
+    max_cells = cell_start.shape[0] - 1
+    while True:
+        n_cells = 1
+        for k in range(3):
+            dims[k] = max(int((hi[k] - lo[k]) / h) + 1, 1) if hi[k] >= lo[k] else 1
+            n_cells *= dims[k]
+        if n_cells <= max_cells:
+            break
+        h *= 1.25
+    for k in range(3):
+        par[P_CELL_LO + k] = lo[k] if hi[k] >= lo[k] else 0.0
+    par[P_CELL_H] = h
     for c in range(n_cells + 1):
         cell_start[c] = 0
     for s in range(ns):
@@ -212,7 +235,22 @@ def _build_sphere_pairs(
 
 @numba.njit(**JIT_FLAGS)
 def _build_wall_pairs(
-    ns, x, radius, sbody, active, par, tri, f_start, f_count, f_wall, f_lo, f_hi, wall_disp, new_i, new_f
+    ns,
+    x,
+    radius,
+    sbody,
+    active,
+    par,
+    tri,
+    f_start,
+    f_count,
+    f_wall,
+    f_lo,
+    f_hi,
+    wall_disp,
+    motion_rows,
+    new_i,
+    new_f,
 ):
     skin = par[P_SKIN]
     cap = new_i.shape[0]
@@ -220,9 +258,11 @@ def _build_wall_pairs(
     for i in range(ns):
         if not active[sbody[i]]:
             continue
-        reach = radius[i] + skin
         for f in range(f_start.shape[0]):
             w = f_wall[f]
+            # A moving wall stays within twice its amplitude of where it is now, so pairs found
+            # with that margin stay valid however far it moves: no rebuild for wall motion.
+            reach = radius[i] + skin + 2.0 * motion_rows[w, 4]
             outside = False
             for k in range(3):
                 xk = x[i, k] - wall_disp[w, k]
@@ -284,7 +324,7 @@ def rebuild_lists(
     new_wf,
     new_whist,
     x_build,
-    wall_disp_build,
+    motion_rows,
     cnt,
 ):
     """Rebuild both neighbour lists, carrying the tangential history of surviving pairs.
@@ -309,6 +349,7 @@ def rebuild_lists(
         f_lo,
         f_hi,
         wall_disp,
+        motion_rows,
         new_wi,
         new_wf,
     )
@@ -384,9 +425,6 @@ def rebuild_lists(
     for s in range(ns):
         for k in range(3):
             x_build[s, k] = x[s, k]
-    for w in range(wall_disp.shape[0]):
-        for k in range(3):
-            wall_disp_build[w, k] = wall_disp[w, k]
     cnt[C_BUILDS] += 1
     return True
 
@@ -734,7 +772,6 @@ def run_steps(
     motion_rows,
     wall_disp,
     wall_vel,
-    wall_disp_build,
     wall_mat,
     tri,
     f_start,
@@ -827,7 +864,7 @@ def run_steps(
             new_wf,
             new_whist,
             x_build,
-            wall_disp_build,
+            motion_rows,
             cnt,
         ):
             cnt[C_MIDSTEP] = 0
@@ -882,17 +919,12 @@ def run_steps(
             _kick(nb, active, vel, angmom, force, torque, mass, half)
             _drift(nb, active, pos, vel, quat, angmom, inertia, rot, lb, dt)
             clk[K_T] += dt
-            wall_move2 = 0.0
             for w in range(n_walls):
                 evaluate_into(motion_rows[w], clk[K_T], wall_disp[w], wall_vel[w])
-                m2 = 0.0
-                for k in range(3):
-                    m2 += (wall_disp[w, k] - wall_disp_build[w, k]) ** 2
-                wall_move2 = max(wall_move2, m2)
             sphere_move2 = update_spheres(ns, x, offset, sbody, active, pos, rot, x_build)
             update_omega(nb, active, rot, angmom, inertia, omega)
             sphere_move = math.sqrt(sphere_move2)
-            if 2.0 * sphere_move > skin or sphere_move + math.sqrt(wall_move2) > skin:
+            if 2.0 * sphere_move > skin:
                 force_rebuild = True
         resume = False
         if force_rebuild:
@@ -930,7 +962,7 @@ def run_steps(
                 new_wf,
                 new_whist,
                 x_build,
-                wall_disp_build,
+                motion_rows,
                 cnt,
             ):
                 cnt[C_MIDSTEP] = 1

@@ -39,7 +39,6 @@ from dem.walls import FacetArrays, WallMesh
 
 log = logging.getLogger(__name__)
 
-_MAX_CELLS = 4_000_000
 _UNSTABLE_REASONS = {
     K.STATUS_UNSTABLE_NAN: "has a NaN or infinite state",
     K.STATUS_UNSTABLE_SPEED: "moves faster than max_speed",
@@ -355,7 +354,6 @@ class Simulation:
             self._motion_rows,
             self._wall_disp,
             self._wall_vel,
-            self._wall_disp_build,
             self._wall_mat,
             f.tri,
             f.facet_tri_start,
@@ -420,15 +418,13 @@ class Simulation:
         radius = self.spheres.radius
         active_r = radius[self.bodies.active[self.spheres.body]] if ns else radius
         r_max = float(active_r.max()) if len(active_r) else float(radius.max())
-        skin = self._skin if self._skin is not None else 0.4 * float(np.mean(radius))
-        h = 2.0 * r_max + skin
-        extent = self.domain_max - self.domain_min
-        while np.prod(np.ceil(extent / h)) > _MAX_CELLS:
-            h *= 1.25
-        self._dims = np.maximum(np.ceil(extent / h), 1).astype(np.int64)
-        n_cells = int(np.prod(self._dims))
+        skin = self._skin if self._skin is not None else 1.0 * float(np.mean(radius))
+        # The kernel grids the spheres' bounding box with cells of at least this size, using
+        # at most this many cells (a few per sphere keeps the empty-cell overhead small).
+        n_cells = max(8 * ns, 1024)
         if not hasattr(self, "_cell_start") or len(self._cell_start) != n_cells + 1:
             self._cell_start = np.zeros(n_cells + 1, dtype=np.int64)
+            self._dims = np.ones(3, dtype=np.int64)
         if not hasattr(self, "_tmp") or len(self._tmp) != ns:
             self._cell_items = np.zeros(ns, dtype=np.int64)
             self._sphere_cell = np.zeros(ns, dtype=np.int64)
@@ -443,8 +439,7 @@ class Simulation:
         self._par[K.P_GX : K.P_GX + 3] = self.gravity
         self._par[K.P_LO : K.P_LO + 3] = self.domain_min
         self._par[K.P_HI : K.P_HI + 3] = self.domain_max
-        self._par[K.P_CELL_LO : K.P_CELL_LO + 3] = self.domain_min
-        self._par[K.P_CELL_H] = h
+        self._par[K.P_CELL_MIN] = 2.0 * r_max + skin
 
     def _wall_arrays(self) -> None:
         n = len(self.walls)
@@ -454,11 +449,8 @@ class Simulation:
             m = wall.material or self.params
             self._motion_rows[k] = motion_row(wall.motion)
             self._wall_mat[k] = m.E, m.damping_ratio, m.mu, m.tangential_ratio
-        old = getattr(self, "_wall_disp_build", np.zeros((0, 3)))
         self._wall_disp = np.zeros((n, 3))
         self._wall_vel = np.zeros((n, 3))
-        self._wall_disp_build = np.zeros((n, 3))
-        self._wall_disp_build[: len(old)] = old
         self._facet_sum = np.zeros(max(len(self._facets.facet_wall), 1))
 
     def _grow_lists(self, need_pp: int, need_wp: int) -> None:
