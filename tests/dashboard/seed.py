@@ -155,7 +155,12 @@ def seed_study(
         recommendation = None
         if matching:
             best = min(matching, key=lambda tid: objectives[tid][1])
-            recommendation = {"trial_id": best, "params": params_of[best], "f1": objectives[best][0]}
+            recommendation = {  # the shape of optimizer.pareto.recommendation_json
+                "trial_ids": [best], "params": params_of[best], "f1": objectives[best][0],
+                "f2": objectives[best][1], "n_remaining": seeded.n_remaining[best],
+                "wall_time_s": objectives[best][1], "target": target, "tolerance": TOLERANCE,
+                "objective_time": "wall",
+            }
         store.save_generation(
             study_id, generation, b"synthetic", front, recommendation,
             objectives={tid: objectives[tid] for tid in (s.trial_id for s in specs)},

@@ -133,6 +133,16 @@ export function targetOf(definition) {
   return value;
 }
 
+// plotly.min.js loads with `async`, so code that draws waits for it here.
+export function plotlyReady() {
+  if (window.Plotly) return Promise.resolve(window.Plotly);
+  return new Promise((resolve, reject) => {
+    const tag = document.getElementById("plotly-js");
+    tag.addEventListener("load", () => resolve(window.Plotly));
+    tag.addEventListener("error", () => reject(new Error("could not load /static/vendor/plotly.min.js")));
+  });
+}
+
 // ---- formatting -----------------------------------------------------------------------------
 
 export function fmt(value, digits = 3) {

@@ -91,7 +91,8 @@ export function paretoFigure(trials, xKey, maxGeneration) {
     customdata: customdata(shown), hovertemplate: HOVER,
     marker: {
       size: 7, opacity: 0.8, color: shown.map((t) => t.generation), colorscale: COLORSCALE,
-      cmin: 0, cmax, line: { width: 0 },
+      // A thin dark rim keeps the light end of viridis visible on white.
+      cmin: 0, cmax, line: { width: 0.6, color: "#3b3b3b" },
       colorbar: { title: { text: "generation" }, thickness: 12, len: 0.8, dtick: cmax > 12 ? undefined : 1 },
     },
   };
@@ -165,11 +166,13 @@ export function generationFigure(trials, target, maxGeneration) {
   return { data, layout };
 }
 
-// One panel per searched parameter: values against generation with the median; fixed ones skipped.
+// One panel per searched parameter: values against generation with the median; fixed ones
+// skipped. A large study gets a box per generation instead of its points: four panels of
+// 10,000 coloured points cost seconds to draw, and the boxes show the narrowing just as well.
 export function parameterFigure(trials, bounds, maxGeneration) {
   const free = PARAMETERS.filter((p) => !bounds[p.key] || bounds[p.key].fixed == null);
   const done = trials.filter((t) => t.params && t.state !== "cancelled");
-  const type = done.length > WEBGL_ABOVE ? "scattergl" : "scatter";
+  const boxes = done.length > WEBGL_ABOVE;
   const gens = done.map((t) => t.generation + jitter(t));
   const data = [];
   const layout = baseLayout({
@@ -179,14 +182,23 @@ export function parameterFigure(trials, bounds, maxGeneration) {
   });
   free.forEach((p, i) => {
     const suffix = i === 0 ? "" : String(i + 1);
-    data.push({
-      type, mode: "markers", name: "trials", showlegend: i === 0,
-      x: gens, y: done.map((t) => t.params[p.key]), xaxis: "x" + suffix, yaxis: "y" + suffix,
-      customdata: customdata(done), hovertemplate: HOVER,
-      marker: { size: 5, color: done.map((t) => t.f1), colorscale: "Cividis", reversescale: true,
-        cmin: 0, showscale: i === 0,
-        colorbar: { title: { text: "f1 (items)" }, thickness: 12, len: 0.8 } },
-    });
+    if (boxes) {
+      data.push({
+        type: "box", name: "trials (quartiles, 1.5 IQR whiskers)", showlegend: i === 0,
+        x: done.map((t) => t.generation), y: done.map((t) => t.params[p.key]),
+        xaxis: "x" + suffix, yaxis: "y" + suffix, boxpoints: false,
+        fillcolor: "rgba(86, 180, 233, 0.35)", line: { color: "#0072b2", width: 1.2 },
+      });
+    } else {
+      data.push({
+        type: "scatter", mode: "markers", name: "trials", showlegend: i === 0,
+        x: gens, y: done.map((t) => t.params[p.key]), xaxis: "x" + suffix, yaxis: "y" + suffix,
+        customdata: customdata(done), hovertemplate: HOVER,
+        marker: { size: 6, color: done.map((t) => t.f1), colorscale: "Cividis", reversescale: true,
+          cmin: 0, showscale: i === 0, line: { width: 0.6, color: "#3b3b3b" },
+          colorbar: { title: { text: "f1 (items)" }, thickness: 12, len: 0.8 } },
+      });
+    }
     const m = byGeneration(done, (t) => t.params[p.key]);
     data.push({
       type: "scatter", mode: "lines+markers", name: "median per generation", showlegend: i === 0,
@@ -195,8 +207,12 @@ export function parameterFigure(trials, bounds, maxGeneration) {
       hovertemplate: `generation %{x}<br>median ${p.label} = %{y:.3g}<extra></extra>`,
     });
     const b = bounds[p.key] || {};
-    const range = Number.isFinite(b.low) && Number.isFinite(b.high)
-      ? (p.log ? [Math.log10(b.low), Math.log10(b.high)] : [b.low, b.high]) : undefined;
+    // The search bounds with 4 % room, so points at a bound are not cut by the axis line.
+    let range;
+    if (Number.isFinite(b.low) && Number.isFinite(b.high)) {
+      const [lo, hi] = p.log ? [Math.log10(b.low), Math.log10(b.high)] : [b.low, b.high];
+      range = [lo - 0.04 * (hi - lo), hi + 0.04 * (hi - lo)];
+    }
     layout["xaxis" + suffix] = axis("generation", { dtick: maxGeneration > 15 ? undefined : 1, range: [-0.6, maxGeneration + 0.6] });
     layout["yaxis" + suffix] = axis(p.title, { type: p.log ? "log" : "linear", range, exponentformat: "power" });
   });

@@ -3,7 +3,8 @@
 // snapshots, a top-view replay on a canvas with the items retained at the end marked.
 
 import {
-  ApiError, PARAMETERS, api, apiKey, el, fmt, fmtSeconds, fmtTime, showBanner, statusBadge, targetOf,
+  ApiError, PARAMETERS, api, apiKey, el, fmt, fmtSeconds, fmtTime, plotlyReady, showBanner, statusBadge,
+  targetOf,
 } from "./api.js";
 import { CONFIG, baseLayout } from "./plots.js";
 
@@ -42,7 +43,7 @@ function facts(trial) {
 }
 
 // Items remaining: a step down at every discharge time, flat to the end of the run.
-function dischargePlot(trial, target) {
+async function dischargePlot(trial, target) {
   const r = trial.result;
   const box = document.getElementById("discharge-plot");
   if (!r || !r.discharge_times?.length) {
@@ -68,6 +69,7 @@ function dischargePlot(trial, target) {
     xaxis: { title: { text: "simulated time t (s)" }, gridcolor: "#e3e6ea", range: [0, end], zeroline: false },
     yaxis: { title: { text: "items in the tray (items)" }, gridcolor: "#e3e6ea", range: [0, n + 0.5], zeroline: false },
   });
+  await plotlyReady();
   Plotly.react(box, data, layout, CONFIG);
 }
 
@@ -269,7 +271,7 @@ async function start() {
     message.hidden = false;
   }
   facts(trial);
-  dischargePlot(trial, targetOf(study.definition));
+  await dischargePlot(trial, targetOf(study.definition));
   await replay();
   section.dataset.loaded = "1";
 }

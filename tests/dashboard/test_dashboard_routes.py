@@ -1,0 +1,137 @@
+"""The dashboard's HTTP side without a browser: page shells, static assets with their caching
+headers (plotly from the installed wheel), and its two JSON routes behind the API keys."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import httpx
+import plotly
+import pytest
+
+from api.dashboard.pages import study_of_trial
+from tests.dashboard.conftest import RETAINED_IN_REPLAY
+
+
+@pytest.fixture
+def http(dashboard):
+    with httpx.Client(base_url=dashboard.base_url, timeout=30) as client:
+        yield client
+
+
+def auth(dashboard) -> dict[str, str]:
+    return {"Authorization": f"Bearer {dashboard.study.api_key}"}
+
+
+@pytest.mark.parametrize("path", ["/", "/new", "/studies/st-x", "/trials/st-x-i00001-r00"])
+def test_page_shells_need_no_key_and_carry_no_study_data(http, path):
+    response = http.get(path)
+
+    assert response.status_code == 200
+    assert response.headers["content-type"].startswith("text/html")
+    assert response.headers["cache-control"] == "private, max-age=60"
+    assert "feeder-calibration" not in response.text
+
+
+def test_study_page_links_plotly_from_the_wheel_with_its_version(http):
+    html = http.get("/studies/st-x").text
+
+    link = re.search(r'src="(/static/vendor/plotly\.min\.js\?v=[^"]+)"', html).group(1)
+    served = http.get(link)
+
+    assert link.endswith(f"v=plotly-{plotly.__version__}")
+    wheel_copy = Path(plotly.__file__).parent / "package_data" / "plotly.min.js"
+    assert served.content == wheel_copy.read_bytes()
+    assert served.headers["cache-control"] == "public, max-age=31536000, immutable"
+
+
+def test_versioned_asset_is_immutable_and_revalidates_with_its_etag(http):
+    link = re.search(r'href="(/static/dashboard\.css\?v=[^"]+)"', http.get("/").text).group(1)
+
+    first = http.get(link)
+    again = http.get(link, headers={"If-None-Match": first.headers["etag"]})
+    unversioned = http.get("/static/dashboard.css")
+
+    assert first.status_code == 200
+    assert first.headers["cache-control"] == "public, max-age=31536000, immutable"
+    assert again.status_code == 304
+    assert again.content == b""
+    assert unversioned.headers["cache-control"] == "no-cache"
+
+
+def test_assets_are_gzipped_when_the_client_accepts_it(http):
+    raw = http.get("/static/study.js", headers={"Accept-Encoding": "identity"})
+    compressed = http.get("/static/study.js", headers={"Accept-Encoding": "gzip"})
+
+    assert "content-encoding" not in raw.headers
+    assert compressed.headers["content-encoding"] == "gzip"
+    assert int(compressed.headers["content-length"]) < len(raw.content)
+    assert compressed.content == raw.content  # httpx decompressed it
+
+
+def test_unknown_asset_and_path_tricks_are_404(http):
+    assert http.get("/static/nope.js").status_code == 404
+    assert http.get("/static/../pages.py").status_code == 404
+    assert http.get("/static/%2e%2e/pages.py").status_code == 404
+
+
+def test_trial_id_names_its_study():
+    assert study_of_trial("st-0123abcd4567-i00042-r01") == "st-0123abcd4567"
+    assert study_of_trial("not-a-trial") is None
+
+
+def test_replay_sends_hulls_once_and_frames_compactly(http, dashboard):
+    study, trial = dashboard.study.study_id, dashboard.study.replay_trial_id
+
+    response = http.get(f"/api/v1/studies/{study}/trials/{trial}/replay", params={"max_frames": 25},
+                        headers=auth(dashboard))
+
+    body = response.json()
+    assert response.status_code == 200
+    assert body["retained"] == RETAINED_IN_REPLAY
+    assert len(body["items"]) == len(RETAINED_IN_REPLAY)
+    assert body["frames_total"] == 60
+    assert len(body["frames"]["t"]) <= 26
+    assert body["frames"]["t"][-1] == 65.0  # the last frame is always sent
+    assert len(body["frames"]["pos"][0]) == len(RETAINED_IN_REPLAY)
+
+
+def test_replay_needs_a_key_of_the_owner(http, dashboard):
+    study, trial = dashboard.study.study_id, dashboard.study.replay_trial_id
+
+    no_key = http.get(f"/api/v1/studies/{study}/trials/{trial}/replay")
+    unknown = f"/api/v1/studies/{study}/trials/{study}-i99999-r00/replay"
+    unknown_trial = http.get(unknown, headers=auth(dashboard))
+
+    assert no_key.status_code == 401
+    assert unknown_trial.status_code == 404
+
+
+def test_replay_of_a_trial_without_snapshots_is_404_saying_where_they_live(http, dashboard):
+    study, trial = dashboard.study.study_id, dashboard.study.trial_ids[0]
+
+    response = http.get(f"/api/v1/studies/{study}/trials/{trial}/replay", headers=auth(dashboard))
+
+    assert response.status_code == 404
+    assert "snapshots" in response.json()["detail"]
+
+
+def test_toml_definition_becomes_the_json_the_api_takes(http, dashboard):
+    toml = 'name = "x"\n[experiment]\nmeasured = [3, 4]\n[ga]\npopulation = 4\n'
+
+    response = http.post("/dashboard/definition", content=toml, headers=auth(dashboard))
+
+    assert response.status_code == 200
+    assert response.json() == {"name": "x", "experiment": {"measured": [3, 4]}, "ga": {"population": 4}}
+
+
+@pytest.mark.parametrize(
+    ("toml", "expected"),
+    [("name = ", "not valid TOML"), ('scenario_path = "/etc/feeder.toml"', "inline as a [scenario] table")],
+)
+def test_bad_toml_definition_is_422_saying_what_to_fix(http, dashboard, toml, expected):
+    response = http.post("/dashboard/definition", content=toml, headers=auth(dashboard))
+
+    assert response.status_code == 422
+    assert expected in response.json()["detail"]
