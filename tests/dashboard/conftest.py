@@ -4,13 +4,12 @@ port, and headless Debian Chromium driven by Playwright.
 
 No browser is ever downloaded: Chromium must be ``/usr/bin/chromium`` (Debian's ``chromium``
 package; ``.ci/run`` installs it). Without it the tests skip with a reason, or fail with
-``CI=true``. Screenshots go to ``test-artifacts/`` (gitignored); with
-``DEMCAL_DASHBOARD_SCREENSHOTS=docs`` the tests also refresh the README's ``docs/*.png``.
+``CI=true``. Screenshots go to ``test-artifacts/`` (gitignored); the README's pictures come
+from ``tests/dashboard/screenshots.py``.
 """
 
 from __future__ import annotations
 
-import os
 import socket
 import threading
 import time
@@ -116,10 +115,8 @@ def page(browser, dashboard):
 
 
 def save_screenshot(page, name: str) -> Path:
-    """A full-page PNG under test-artifacts/, and under docs/ when DEMCAL_DASHBOARD_SCREENSHOTS=docs."""
+    """A full-page PNG under test-artifacts/, for a person to look at after a run."""
     ARTIFACTS.mkdir(exist_ok=True)
     path = ARTIFACTS / f"{name}.png"
     page.screenshot(path=str(path), full_page=True)
-    if os.environ.get("DEMCAL_DASHBOARD_SCREENSHOTS") == "docs":
-        page.screenshot(path=str(REPO / "docs" / f"{name}.png"), full_page=True)
     return path

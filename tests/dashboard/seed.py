@@ -90,8 +90,14 @@ def seed_study(
     seed: int = 7,
     owner: str = "alice",
     name: str = "feeder-calibration",
+    real_results: dict[int, SimulationResult] | None = None,
 ) -> SeededStudy:
-    """A finished study with every trial done, objectives and the final Pareto flags stored."""
+    """A finished study with every trial done, objectives and the final Pareto flags stored.
+
+    ``real_results`` replaces the made-up result of these individuals (e.g. with a real feeder
+    run whose snapshots the replay shows); their parameters become the run's.
+    """
+    real_results = real_results or {}
     rng = np.random.default_rng(seed)
     definition = parse_study(
         {
@@ -124,6 +130,8 @@ def seed_study(
                 "e": float(np.clip(TRUTH["e"] + rng.normal(0, 0.4 * width), 0.05, 0.95)),
                 "mu": float(np.clip(TRUTH["mu"] + rng.normal(0, 0.4 * width), 0.05, 1.0)),
             }
+            if individual in real_results:
+                params = {name: float(real_results[individual].params[name]) for name in params}
             params_of[trial_id(study_id, individual, 0)] = params
             specs.append(
                 TrialSpec(
@@ -143,6 +151,9 @@ def seed_study(
                 steps=int(cost / 400), dt=65.0 / max(1, int(cost / 400)), cost=cost, params=spec.params,
                 seed=spec.seed,
             )
+            if spec.individual in real_results:
+                result = real_results[spec.individual]
+                n_remaining, wall = result.n_remaining, result.wall_time_s
             store.record_result(TrialOutcome(spec.trial_id, result, worker="seed"))
             f1 = abs(n_remaining - target)
             objectives[spec.trial_id] = (f1, wall)
