@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from api.store import SqlStore
 from tests.conftest import _in_ci
 from tests.dashboard.seed import SeededStudy, migrated_store, seed_study, snapshot_run
 
@@ -41,6 +42,7 @@ RETAINED_IN_REPLAY = [i % 4 == 0 for i in range(12)]
 class Dashboard:
     base_url: str
     study: SeededStudy
+    store: SqlStore
 
     def url(self, path: str) -> str:
         return self.base_url + path
@@ -78,7 +80,7 @@ def dashboard(tmp_path_factory):
         if time.monotonic() > deadline or not thread.is_alive():
             pytest.fail("uvicorn did not start the dashboard within 20 s")
         time.sleep(0.05)
-    yield Dashboard(f"http://127.0.0.1:{port}", study)
+    yield Dashboard(f"http://127.0.0.1:{port}", study, store)
     server.should_exit = True
     thread.join(timeout=10)
     store.engine.dispose()

@@ -216,3 +216,33 @@ def snapshot_run(directory: Path, n_items: int, retained: list[bool], frames: in
         writer.frame(t, pos, quat, state)
     times = [None if keep else 30.0 for keep in retained]
     writer.summary({"discharge_times": times})
+
+
+def add_finished_trials(
+    store: SqlStore, study_id: str, generation: int, first_individual: int, count: int, seed: int = 11
+) -> list[str]:
+    """``count`` more done trials in ``generation`` of a study, as a running study gets them."""
+    rng = np.random.default_rng(seed)
+    specs = [
+        TrialSpec(
+            trial_id=trial_id(study_id, individual, 0), study_id=study_id, individual=individual,
+            generation=generation, replicate=0, seed=individual,
+            params={"E": float(10 ** rng.uniform(5, 9)), "nu": float(rng.uniform(0, 0.49)),
+                    "e": float(rng.uniform(0.05, 0.95)), "mu": float(rng.uniform(0.05, 1.0))},
+            scenario={},
+        )
+        for individual in range(first_individual, first_individual + count)
+    ]
+    store.add_trials(specs)
+    objectives = {}
+    for spec in specs:
+        n_remaining, wall, cost = _response(spec.params, rng)
+        result = SimulationResult(
+            status=SimulationStatus.OK, n_items=N_ITEMS, n_remaining=n_remaining, sim_time=65.0,
+            wall_time_s=wall, cost=cost, params=spec.params, seed=spec.seed,
+            discharge_times=[30.0] * (N_ITEMS - n_remaining) + [None] * n_remaining,
+        )
+        store.record_result(TrialOutcome(spec.trial_id, result))
+        objectives[spec.trial_id] = (abs(n_remaining - 4.0), wall)
+    store.save_generation(study_id, generation, b"synthetic", [], None, objectives=objectives)
+    return [spec.trial_id for spec in specs]

@@ -8,7 +8,10 @@ import re
 
 import pytest
 
+from optimizer.protocols import StudyStatus
+from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
+from tests.dashboard.seed import add_finished_trials
 
 pytestmark = pytest.mark.browser
 
@@ -52,6 +55,26 @@ def test_pareto_plot_has_a_point_per_trial_and_highlights_the_front(page, dashbo
     assert front["symbol"] == "diamond"
     assert page.errors == []
     save_screenshot(page, "dashboard-study")
+
+
+def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
+    definition = parse_study({"name": "live", "scenario": {}, "experiment": {"measured": [4]}})
+    study_id = dashboard.store.create_study(definition.model_dump(mode="json"), owner="alice")
+    dashboard.store.set_status(study_id, StudyStatus.RUNNING)
+    add_finished_trials(dashboard.store, study_id, generation=0, first_individual=0, count=6)
+    polls = []
+    page.on("response", lambda response: polls.append(response) if "updated_since=" in response.url else None)
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function(PLOTTED, arg="pareto-plot")
+
+    new_ids = add_finished_trials(
+        dashboard.store, study_id, generation=1, first_individual=6, count=3, seed=12
+    )
+    page.wait_for_function("() => document.getElementById('pareto-plot').data[0].x.length === 9")
+
+    sent = {item["id"] for response in polls for item in response.json()["items"]}
+    assert polls, "the page never polled with updated_since"
+    assert sent == set(new_ids)
 
 
 def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dashboard):
