@@ -1,0 +1,76 @@
+"""The job function: a real (tiny) feeder simulation in, its result as JSON out, never a raise."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import pytest
+
+from dem.result import SimulationResult, SimulationStatus
+from optimizer.protocols import TrialSpec
+from worker.jobs import run_trial
+
+# Two items, a fraction of a second: the smallest run that still deposits and vibrates.
+TINY_SCENARIO = {
+    "items": {"counts": {"smartphone": 1, "camera": 1}, "resolution": 4},
+    "stages": {"insertion_time": 0.1, "vibration_start": 0.3, "vibration_time": 0.2},
+}
+# Ten minutes simulated, and no early end when the tray empties: always longer than any deadline.
+LONG_SCENARIO = {
+    **TINY_SCENARIO,
+    "stages": {**TINY_SCENARIO["stages"], "vibration_time": 600.0},
+    "run": {"stop_when_empty": False},
+}
+PARAMS = {"E": 1e6, "nu": 0.3, "e": 0.5, "mu": 0.5}
+
+
+def tiny_spec(trial="t-0", scenario=None, params=None, timeout_s=None, seed=3) -> dict:
+    spec = TrialSpec(trial, "t", 0, 0, 0, seed, params or PARAMS, scenario or TINY_SCENARIO, timeout_s)
+    return asdict(spec)
+
+
+@pytest.mark.slow
+def test_tiny_feeder_run_returns_a_valid_result_with_its_seed_and_params():
+    result = SimulationResult.model_validate(run_trial(tiny_spec()))
+
+    assert result.status is SimulationStatus.OK, result.message
+    assert result.n_items == 2
+    assert 0 <= result.n_remaining <= 2
+    assert (result.seed, result.params) == (3, PARAMS)
+    assert result.steps > 0 and result.cost > 0
+
+
+def test_bad_scenario_becomes_an_error_result_naming_the_key():
+    spec = tiny_spec(scenario={"vibration": {"amplitude": -1.0}})
+
+    result = SimulationResult.model_validate(run_trial(spec))
+
+    assert result.status is SimulationStatus.ERROR
+    assert "amplitude" in result.message
+
+
+def test_unusable_parameter_becomes_an_error_result():
+    spec = tiny_spec(params={**PARAMS, "nu": 0.7})
+
+    result = SimulationResult.model_validate(run_trial(spec))
+
+    assert result.status is SimulationStatus.ERROR
+    assert "nu" in result.message
+
+
+def test_missing_scenario_becomes_an_error_result():
+    spec = tiny_spec()
+    del spec["scenario"]
+
+    result = SimulationResult.model_validate(run_trial(spec))
+
+    assert result.status is SimulationStatus.ERROR
+    assert "scenario" in result.message
+
+
+@pytest.mark.slow
+def test_deadline_ends_the_run_as_timeout():
+    result = SimulationResult.model_validate(run_trial(tiny_spec(scenario=LONG_SCENARIO, timeout_s=3.0)))
+
+    assert result.status is SimulationStatus.TIMEOUT
+    assert result.sim_time < 600.0
