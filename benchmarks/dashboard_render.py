@@ -21,7 +21,9 @@ import threading
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# The repository root instead of benchmarks/: benchmarks/queue.py would shadow the standard
+# library's queue module that uvicorn imports.
+sys.path[0] = str(Path(__file__).resolve().parents[1])
 
 from tests.dashboard.conftest import CHROMIUM, CHROMIUM_ARGS, _free_port  # noqa: E402
 from tests.dashboard.seed import migrated_store, seed_study  # noqa: E402

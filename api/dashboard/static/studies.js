@@ -41,6 +41,7 @@ function row(item, study) {
     el("td", { text: progress ? `${progress.generation} of ${progress.generations_total}` : String(item.generation) }),
     el("td", { text: recommendationText(study) }),
     el("td", { text: fmtTime(item.created_at) }),
+    // The API has no finish time; a finished study's last update is the status change that ended it.
     el("td", { text: TERMINAL.has(item.status) ? fmtTime(item.updated_at) : "–" }),
   );
 }

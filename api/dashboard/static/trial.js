@@ -3,8 +3,8 @@
 // snapshots, a top-view replay on a canvas with the items retained at the end marked.
 
 import {
-  ApiError, PARAMETERS, api, apiKey, el, fmt, fmtSeconds, fmtTime, plotlyReady, showBanner, statusBadge,
-  targetOf,
+  ApiError, PARAMETERS, api, apiKey, el, fmt, fmtSeconds, fmtTime, plotlyReady, poll, showBanner,
+  statusBadge, targetOf,
 } from "./api.js";
 import { CONFIG, baseLayout } from "./plots.js";
 
@@ -70,6 +70,7 @@ async function dischargePlot(trial, target) {
     yaxis: { title: { text: "items in the tray (items)" }, gridcolor: "#e3e6ea", range: [0, n + 0.5], zeroline: false },
   });
   await plotlyReady();
+  if (!box.data) box.replaceChildren(); // drop the "no result yet" note before the first draw
   Plotly.react(box, data, layout, CONFIG);
 }
 
@@ -249,6 +250,18 @@ async function replay() {
   section.dataset.replayFrames = String(count);
 }
 
+function showTrial(trial, target) {
+  document.getElementById("trial-status").replaceWith(
+    Object.assign(statusBadge(trial.status || trial.state), { id: "trial-status" }));
+  const message = document.getElementById("trial-message");
+  message.textContent = trial.message || "";
+  message.hidden = !trial.message;
+  facts(trial);
+  return dischargePlot(trial, target);
+}
+
+// A trial that is still queued or running is re-read every few seconds until it has a result;
+// the replay is loaded once, when it has finished.
 async function start() {
   if (!studyId) {
     showBanner(`${trialId} is not a trial id (expected <study>-iNNNNN-rNN).`);
@@ -260,20 +273,16 @@ async function start() {
     showBanner("Paste an API key (from `demcal apikey create`) in the box above to see this trial.", "warn");
     return;
   }
-  const [trial, study] = await Promise.all([
-    api(trialPath), api(`/studies/${encodeURIComponent(studyId)}`),
-  ]);
-  document.getElementById("trial-status").replaceWith(
-    Object.assign(statusBadge(trial.status || trial.state), { id: "trial-status" }));
-  if (trial.message) {
-    const message = document.getElementById("trial-message");
-    message.textContent = trial.message;
-    message.hidden = false;
-  }
-  facts(trial);
-  await dischargePlot(trial, targetOf(study.definition));
-  await replay();
-  section.dataset.loaded = "1";
+  const study = await api(`/studies/${encodeURIComponent(studyId)}`);
+  const target = targetOf(study.definition);
+  poll(async () => {
+    const trial = await api(trialPath);
+    await showTrial(trial, target);
+    const finished = trial.state === "done" || trial.state === "cancelled";
+    if (finished) await replay();
+    section.dataset.loaded = "1";
+    return !finished;
+  }, 3000);
 }
 
 start().catch((error) => {
