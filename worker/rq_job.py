@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import time
 from typing import Any
 
@@ -39,18 +38,13 @@ def results_key(queue_name: str, study_id: str) -> str:
     return f"demcal:results:{queue_name}:{study_id}"
 
 
-def worker_name() -> str | None:
-    """The RQ worker running this process (RQ sets it in the work horse's environment)."""
-    return os.environ.get("RQ_WORKER_ID")
-
-
 def deliver(job: Job, spec: dict[str, Any], result: dict[str, Any]) -> None:
     """Push one finished trial's result where the executor will take it."""
     envelope = json.dumps(
         {
             "trial_id": spec["trial_id"],
             "study_id": spec["study_id"],
-            "worker": worker_name(),
+            "worker": job.worker_name,
             "result": result,
         }
     )

@@ -1,15 +1,18 @@
 """The machinery of ``demcal worker``: an RQ worker configured for demcal's trials.
 
-* RQ's forking ``Worker``: each trial runs in a child process (a "work horse"), so a crash in a
-  numba kernel or a memory blow-up fails that one job, which RQ then retries; the worker lives
-  on. The heavy modules (numpy, numba, the engine) are imported once in the parent before the
-  first fork, so a horse starts with them loaded; numba's on-disk cache (``cache=True``) spares it
-  the compilation.
-* Heartbeats: while a horse runs, the parent refreshes the job's entry in RQ's started registry
-  every ``heartbeat_s`` seconds. The entry expires ``heartbeat_s + grace`` seconds after the last
-  refresh (``get_heartbeat_ttl``); RQ's default grace is 60 s, ours is ``2 x heartbeat_s`` so
-  that the service notices a worker killed with SIGKILL (or a machine lost) within about half
-  a minute and re-runs its trial.
+* RQ's ``SimpleWorker`` runs each trial in the worker process itself, not in a forked "work
+  horse": the engine's numba kernels, compiled (or loaded from numba's on-disk cache) by the
+  first trial, stay in memory for every later one, and a job costs no fork. A forking worker
+  measured about 95 ms of queue overhead per job on our 2-core machine (``benchmarks/queue.py``),
+  mostly the fork of a process holding numpy, numba and the engine, plus a reload of every
+  compiled kernel per trial. What the fork would isolate (a crash inside a kernel) is covered
+  anyway: the process dies, its heartbeats stop, the trial is retried on another worker and the
+  supervisor (compose ``restart``) starts a new worker.
+* Heartbeats: a thread refreshes the job's entry in RQ's started registry every
+  ``heartbeat_s`` seconds while the trial runs (the kernels return to Python between chunks, so
+  the thread gets its turn). The entry expires ``3 x heartbeat_s`` after the last refresh
+  (``get_heartbeat_ttl``; RQ's own grace is 60 s), so the service notices a worker killed with
+  SIGKILL, or a machine lost, within seconds and runs its trial again.
 * Shutdown: the first SIGTERM or SIGINT is a *warm* shutdown: the worker takes no new job, lets
   the running trial finish and deliver its result, then exits 0. A trial can take minutes, so a
   supervisor must wait that long before it sends SIGKILL (compose: ``stop_grace_period``). A
@@ -24,13 +27,15 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import threading
 import uuid
 from collections.abc import Sequence
 
 from redis import Redis
-from rq import Queue, Worker
+from rq import Queue, SimpleWorker
 from rq.job import Job
 from rq.serializers import JSONSerializer
+from rq.worker import WorkerStatus
 
 logger = logging.getLogger(__name__)
 
@@ -41,14 +46,30 @@ class WorkerSetupError(RuntimeError):
     """The worker cannot start (no Redis URL, Redis unreachable); the message says what to fix."""
 
 
-class DemcalWorker(Worker):
-    """RQ's forking worker, whose jobs count as abandoned soon after its heartbeats stop."""
+class DemcalWorker(SimpleWorker):
+    """RQ's in-process worker, with heartbeats while a job runs and a short heartbeat grace."""
 
     def get_heartbeat_ttl(self, job: Job) -> int:
-        interval = self.job_monitoring_interval
-        if job.timeout and job.timeout > 0:
-            interval = min(interval, max(1, job.timeout - self.current_job_working_time))
-        return int(interval + 2 * self.job_monitoring_interval)
+        return int(3 * self.job_monitoring_interval)
+
+    def execute_job(self, job: Job, queue: Queue) -> None:
+        self.prepare_execution(job)
+        done = threading.Event()
+        beating = threading.Thread(target=self._beat, args=(job, done), name="heartbeat", daemon=True)
+        beating.start()
+        try:
+            self.perform_job(job, queue)
+        finally:
+            done.set()
+            beating.join()
+        self.set_state(WorkerStatus.IDLE)
+
+    def _beat(self, job: Job, done: threading.Event) -> None:
+        while not done.wait(self.job_monitoring_interval):
+            try:
+                self.maintain_heartbeats(job)
+            except Exception as exc:  # Redis briefly away, or the job ended under our feet
+                logger.warning("worker %s: heartbeat for %s failed: %s", self.name, job.id, exc)
 
 
 def worker_name() -> str:
@@ -90,9 +111,9 @@ def build_worker(
 
 
 def preload() -> None:
-    """Import the simulation stack once in the parent, so that every forked horse has it."""
-    import worker.jobs  # noqa: F401 - imported for its side effect: modules loaded before fork
-    import worker.rq_job  # noqa: F401
+    """Import the simulation stack before the first job, so that its start-up is not a trial's."""
+    import dem.scenarios.feeder  # noqa: F401 - imported for its side effect: modules loaded
+    import worker.jobs  # noqa: F401
 
 
 def run_worker(
