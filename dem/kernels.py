@@ -57,6 +57,9 @@ C_CONTACTS = 10  # force-carrying sphere contacts at the last step
 N_CNT = 11
 # Layout of the float clock ``clk``: time, accumulated cost.
 K_T, K_COST = 0, 1
+# A sphere is rejected on its plane distance only when that exceeds its reach by far more than
+# rounding, so the plane test never drops a pair that the closest-point test would keep.
+_PLANE_SLACK = 1.0 + 1e-9
 
 
 @numba.njit(**JIT_FLAGS)
@@ -103,8 +106,14 @@ def closest_point_on_triangle(px, py, pz, tri):
 
 
 @numba.njit(**JIT_FLAGS)
-def closest_point_on_facet(px, py, pz, tri, start, count, dx, dy, dz):
-    """(squared distance, closest point, face flag) of p to a facet displaced by (dx, dy, dz).
+def plane_distance(px, py, pz, f_normal, f_offset, f, dx, dy, dz):
+    """Signed distance of p from the plane of facet f displaced by (dx, dy, dz)."""
+    return (px - dx) * f_normal[f, 0] + (py - dy) * f_normal[f, 1] + (pz - dz) * f_normal[f, 2] - f_offset[f]
+
+
+@numba.njit(**JIT_FLAGS)
+def closest_point_on_facet(px, py, pz, tri, f_start, f_count, f_normal, f_offset, f, dx, dy, dz):
+    """(squared distance, closest point, face flag) of p to facet f displaced by (dx, dy, dz).
 
     The face flag is True when the closest point is the projection of p on the facet's plane
     (an interior contact), False on an edge or a corner.
@@ -112,17 +121,13 @@ def closest_point_on_facet(px, py, pz, tri, start, count, dx, dy, dz):
     best = np.inf
     bx = by = bz = 0.0
     qx, qy, qz = px - dx, py - dy, pz - dz
-    for t in range(start, start + count):
+    start = f_start[f]
+    for t in range(start, start + f_count[f]):
         cx, cy, cz = closest_point_on_triangle(qx, qy, qz, tri[t])
         d2 = (qx - cx) ** 2 + (qy - cy) ** 2 + (qz - cz) ** 2
         if d2 < best:
             best, bx, by, bz = d2, cx, cy, cz
-    t0 = tri[start]
-    e1x, e1y, e1z = t0[1, 0] - t0[0, 0], t0[1, 1] - t0[0, 1], t0[1, 2] - t0[0, 2]
-    e2x, e2y, e2z = t0[2, 0] - t0[0, 0], t0[2, 1] - t0[0, 1], t0[2, 2] - t0[0, 2]
-    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-    nn = nx * nx + ny * ny + nz * nz
-    plane = ((qx - t0[0, 0]) * nx + (qy - t0[0, 1]) * ny + (qz - t0[0, 2]) * nz) ** 2 / nn
+    plane = plane_distance(qx, qy, qz, f_normal, f_offset, f, 0.0, 0.0, 0.0) ** 2
     is_face = best - plane <= 1e-10 * best + 1e-30
     return best, bx + dx, by + dy, bz + dz, is_face
 
@@ -247,6 +252,8 @@ def _build_wall_pairs(
     f_wall,
     f_lo,
     f_hi,
+    f_normal,
+    f_offset,
     wall_disp,
     motion_rows,
     new_i,
@@ -270,13 +277,29 @@ def _build_wall_pairs(
                     outside = True
             if outside:
                 continue
+            s = plane_distance(
+                x[i, 0],
+                x[i, 1],
+                x[i, 2],
+                f_normal,
+                f_offset,
+                f,
+                wall_disp[w, 0],
+                wall_disp[w, 1],
+                wall_disp[w, 2],
+            )
+            if s * s >= reach * reach * _PLANE_SLACK:
+                continue
             d2, _, _, _, _ = closest_point_on_facet(
                 x[i, 0],
                 x[i, 1],
                 x[i, 2],
                 tri,
-                f_start[f],
-                f_count[f],
+                f_start,
+                f_count,
+                f_normal,
+                f_offset,
+                f,
                 wall_disp[w, 0],
                 wall_disp[w, 1],
                 wall_disp[w, 2],
@@ -316,6 +339,8 @@ def rebuild_lists(
     f_wall,
     f_lo,
     f_hi,
+    f_normal,
+    f_offset,
     wall_disp,
     wp_i,
     wp_f,
@@ -348,6 +373,8 @@ def rebuild_lists(
         f_wall,
         f_lo,
         f_hi,
+        f_normal,
+        f_offset,
         wall_disp,
         motion_rows,
         new_wi,
@@ -516,6 +543,8 @@ def compute_forces(
     f_start,
     f_count,
     f_wall,
+    f_normal,
+    f_offset,
     wall_vel,
     wall_disp,
     wall_mat,
@@ -614,18 +643,35 @@ def compute_forces(
         if not active[sbody[i]]:
             continue
         w = f_wall[f]
+        r2 = radius[i] * radius[i]
+        s = plane_distance(
+            x[i, 0],
+            x[i, 1],
+            x[i, 2],
+            f_normal,
+            f_offset,
+            f,
+            wall_disp[w, 0],
+            wall_disp[w, 1],
+            wall_disp[w, 2],
+        )
+        if s * s >= r2 * _PLANE_SLACK:
+            continue
         d2, cx, cy, cz, is_face = closest_point_on_facet(
             x[i, 0],
             x[i, 1],
             x[i, 2],
             tri,
-            f_start[f],
-            f_count[f],
+            f_start,
+            f_count,
+            f_normal,
+            f_offset,
+            f,
             wall_disp[w, 0],
             wall_disp[w, 1],
             wall_disp[w, 2],
         )
-        if d2 >= radius[i] * radius[i]:
+        if d2 >= r2:
             continue
         d = math.sqrt(d2)
         delta = radius[i] - d
@@ -663,8 +709,11 @@ def compute_forces(
                     wp_cp[a, 1],
                     wp_cp[a, 2],
                     tri,
-                    f_start[fc],
-                    f_count[fc],
+                    f_start,
+                    f_count,
+                    f_normal,
+                    f_offset,
+                    fc,
                     wall_disp[w, 0],
                     wall_disp[w, 1],
                     wall_disp[w, 2],
@@ -779,6 +828,8 @@ def run_steps(
     f_wall,
     f_lo,
     f_hi,
+    f_normal,
+    f_offset,
     cell_start,
     cell_items,
     sphere_cell,
@@ -856,6 +907,8 @@ def run_steps(
             f_wall,
             f_lo,
             f_hi,
+            f_normal,
+            f_offset,
             wall_disp,
             wp_i,
             wp_f,
@@ -897,6 +950,8 @@ def run_steps(
             f_start,
             f_count,
             f_wall,
+            f_normal,
+            f_offset,
             wall_vel,
             wall_disp,
             wall_mat,
@@ -954,6 +1009,8 @@ def run_steps(
                 f_wall,
                 f_lo,
                 f_hi,
+                f_normal,
+                f_offset,
                 wall_disp,
                 wp_i,
                 wp_f,
@@ -995,6 +1052,8 @@ def run_steps(
             f_start,
             f_count,
             f_wall,
+            f_normal,
+            f_offset,
             wall_vel,
             wall_disp,
             wall_mat,

@@ -361,6 +361,8 @@ class Simulation:
             f.facet_wall,
             f.facet_lo,
             f.facet_hi,
+            f.facet_normal,
+            f.facet_offset,
             self._cell_start,
             self._cell_items,
             self._sphere_cell,

@@ -159,10 +159,14 @@ class FacetArrays:
     facet_wall: np.ndarray  # (n_facets,) index of the owning wall
     facet_lo: np.ndarray  # (n_facets, 3) bounding box at the reference position
     facet_hi: np.ndarray  # (n_facets, 3)
+    # The facet's plane, n . x = offset (unit normal, reference position): the kernels reject a
+    # sphere whose plane distance exceeds its reach before any closest-point test.
+    facet_normal: np.ndarray  # (n_facets, 3)
+    facet_offset: np.ndarray  # (n_facets,)
 
     @classmethod
     def build(cls, walls: list[WallMesh]) -> FacetArrays:
-        tris, starts, counts, owners, los, his = [], [], [], [], [], []
+        tris, starts, counts, owners, los, his, normals, offsets = [], [], [], [], [], [], [], []
         n_tri = 0
         for w, wall in enumerate(walls):
             for facet in wall.facets:
@@ -173,6 +177,10 @@ class FacetArrays:
                 owners.append(w)
                 los.append(corners.reshape(-1, 3).min(axis=0))
                 his.append(corners.reshape(-1, 3).max(axis=0))
+                normal = np.cross(corners[0, 1] - corners[0, 0], corners[0, 2] - corners[0, 0])
+                normal /= np.linalg.norm(normal)
+                normals.append(normal)
+                offsets.append(float(normal @ corners[0, 0]))
                 n_tri += len(facet)
         if not tris:
             return cls(
@@ -182,6 +190,8 @@ class FacetArrays:
                 np.zeros(0, np.int64),
                 np.zeros((0, 3)),
                 np.zeros((0, 3)),
+                np.zeros((0, 3)),
+                np.zeros(0),
             )
         return cls(
             np.ascontiguousarray(np.concatenate(tris)),
@@ -190,4 +200,6 @@ class FacetArrays:
             np.array(owners, dtype=np.int64),
             np.array(los),
             np.array(his),
+            np.array(normals),
+            np.array(offsets),
         )
