@@ -66,10 +66,19 @@ function customdata(trials) {
   ]);
 }
 
-function yTop(trials) {
+function yTop(trials, value = (t) => t.f1) {
   let top = 1;
-  for (const t of trials) top = Math.max(top, t.f1);
+  for (const t of trials) {
+    const v = value(t);
+    if (Number.isFinite(v)) top = Math.max(top, v);
+  }
   return top;
+}
+
+// From a little below zero, so that values of 0 are not hidden under the axis line.
+function fromZero(trials, value) {
+  const top = yTop(trials, value);
+  return [-0.06 * top, 1.06 * top];
 }
 
 export const X_AXES = {
@@ -108,10 +117,7 @@ export function paretoFigure(trials, xKey, maxGeneration) {
   };
   const layout = baseLayout({
     xaxis: axis(x.title),
-    // Padding below zero so that the best points (f1 = 0) are not hidden under the axis line.
-    yaxis: axis("f1 = |N<sub>t</sub> − target| (items)", {
-      range: [-0.06 * yTop(shown), 1.06 * yTop(shown)],
-    }),
+    yaxis: axis("f1 = |N<sub>t</sub> − target| (items)", { range: fromZero(shown, (t) => t.f1) }),
     hovermode: "closest",
     uirevision: xKey,
   });
@@ -156,12 +162,15 @@ export function generationFigure(trials, target, maxGeneration) {
   const layout = baseLayout({
     grid: { rows: 1, columns: 2, pattern: "independent" },
     xaxis: genAxis("generation"),
-    yaxis: axis("(a) items remaining N<sub>t</sub> (items)", { rangemode: "tozero" }),
+    yaxis: axis("(a) items remaining N<sub>t</sub> (items)", {
+      range: fromZero(done, (t) => Math.max(t.n_remaining ?? 0, Number.isFinite(target) ? target : 0)),
+    }),
     xaxis2: genAxis("generation"),
-    yaxis2: axis("(b) computation time T (s)", { rangemode: "tozero" }),
+    yaxis2: axis("(b) computation time T (s)", { range: fromZero(done, (t) => t.wall_time_s) }),
     shapes,
     hovermode: "closest",
     margin: { l: 64, r: 24, t: 40, b: 56 },
+    uirevision: "keep", // a zoom survives the next poll's redraw
   });
   return { data, layout };
 }
@@ -179,6 +188,7 @@ export function parameterFigure(trials, bounds, maxGeneration) {
     grid: { rows: Math.ceil(free.length / 2), columns: Math.min(2, free.length), pattern: "independent" },
     hovermode: "closest",
     margin: { l: 72, r: 24, t: 40, b: 56 },
+    uirevision: "keep",
   });
   free.forEach((p, i) => {
     const suffix = i === 0 ? "" : String(i + 1);
