@@ -40,6 +40,8 @@ async def toml_definition(request: Request, principal: ApiKeyDep, settings: Sett
         raise InvalidInputError("the definition is not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise InvalidInputError(f"not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses per nesting level: "a = [[[[...]]]]" can exhaust it
+        raise InvalidInputError("the TOML is nested too deeply; a study definition is a few tables") from None
     if "scenario_path" in data:
         raise InvalidInputError(
             "scenario_path names a file on your machine, which the server cannot read: paste the "

@@ -128,7 +128,11 @@ def test_toml_definition_becomes_the_json_the_api_takes(http, dashboard):
 
 @pytest.mark.parametrize(
     ("toml", "expected"),
-    [("name = ", "not valid TOML"), ('scenario_path = "/etc/feeder.toml"', "inline as a [scenario] table")],
+    [
+        ("name = ", "not valid TOML"),
+        ('scenario_path = "/etc/feeder.toml"', "inline as a [scenario] table"),
+        ("a = " + "[" * 5000 + "]" * 5000, "nested too deeply"),
+    ],
 )
 def test_bad_toml_definition_is_422_saying_what_to_fix(http, dashboard, toml, expected):
     response = http.post("/dashboard/definition", content=toml, headers=auth(dashboard))
