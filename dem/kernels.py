@@ -51,6 +51,8 @@ P_CELL_MIN = 20  # smallest cell size: largest sphere diameter + skin
 N_PAR = 21
 # Layout of the per-wall material rows ``wall_mat``.
 W_E, W_ZETA, W_MU, W_KT = 0, 1, 2, 3
+# Layout of the per-body-pair contact law rows ``grp_law`` (filled at each list build).
+G_KN, G_CN, G_KT, G_CT = 0, 1, 2, 3
 # Layout of the integer counters ``cnt``.
 C_STEPS, C_BUILDS, C_NEED_PP, C_NEED_WP, C_EVENTS, C_BAD_BODY, C_PP, C_WP, C_GROUPS, C_MIDSTEP = range(10)
 C_CONTACTS = 10  # force-carrying sphere contacts at the last step
@@ -330,6 +332,9 @@ def rebuild_lists(
     pp_j,
     pp_hist,
     pp_group,
+    grp_law,
+    mass,
+    diameter,
     new_i,
     new_j,
     new_hist,
@@ -429,6 +434,21 @@ def rebuild_lists(
         pp_group[p] = n_groups
     cnt[C_GROUPS] = n_groups + 1 if n_pp > 0 else 0
     cnt[C_PP] = n_pp
+    # The contact law's constants belong to the body pair (dem/contact.py), so they are
+    # computed once per build, not once per sphere contact and step.
+    E, zeta, kt_ratio = par[P_E], par[P_ZETA], par[P_KT]
+    for p in range(n_pp):
+        if p > 0 and pp_group[p] == pp_group[p - 1]:
+            continue
+        ba, bb = sbody[pp_i[p]], sbody[pp_j[p]]
+        k_n = E * diameter[ba] * diameter[bb] / (diameter[ba] + diameter[bb])
+        m_eff = mass[ba] * mass[bb] / (mass[ba] + mass[bb])
+        k_t = kt_ratio * k_n
+        g = pp_group[p]
+        grp_law[g, G_KN] = k_n
+        grp_law[g, G_CN] = 2.0 * zeta * math.sqrt(k_n * m_eff)
+        grp_law[g, G_KT] = k_t
+        grp_law[g, G_CT] = 2.0 * zeta * math.sqrt(k_t * m_eff)
 
     old = 0
     n_old = cnt[C_WP]
@@ -538,6 +558,7 @@ def compute_forces(
     pp_delta,
     pp_n,
     grp_sum,
+    grp_law,
     cnt,
     tri,
     f_start,
@@ -560,7 +581,7 @@ def compute_forces(
 ):
     """Gravity plus all contact forces and torques. Returns a status (overlap blow-up) and the
     number of sphere contacts carrying force (for the cost)."""
-    E, zeta, mu, kt_ratio, lim = par[P_E], par[P_ZETA], par[P_MU], par[P_KT], par[P_OVERLAP]
+    E, mu, lim = par[P_E], par[P_MU], par[P_OVERLAP]
     for b in range(nb):
         for k in range(3):
             force[b, k] = mass[b] * par[P_GX + k]
@@ -610,14 +631,25 @@ def compute_forces(
         vz = (vel[ba, 2] + omega[ba, 0] * ray - omega[ba, 1] * rax) - (
             vel[bb, 2] + omega[bb, 0] * rby - omega[bb, 1] * rbx
         )
-        k_n = E * diameter[ba] * diameter[bb] / (diameter[ba] + diameter[bb])
-        m_eff = mass[ba] * mass[bb] / (mass[ba] + mass[bb])
-        k_t = kt_ratio * k_n
-        c_n = 2.0 * zeta * math.sqrt(k_n * m_eff)
-        c_t = 2.0 * zeta * math.sqrt(k_t * m_eff)
-        weight = share_weight(delta) / grp_sum[pp_group[p]]
+        g = pp_group[p]
+        weight = share_weight(delta) / grp_sum[g]
         fx, fy, fz, _ = sphere_contact_force(
-            nx, ny, nz, delta, vx, vy, vz, weight, k_n, c_n, k_t, c_t, mu, pp_hist, p, hist_dt
+            nx,
+            ny,
+            nz,
+            delta,
+            vx,
+            vy,
+            vz,
+            weight,
+            grp_law[g, G_KN],
+            grp_law[g, G_CN],
+            grp_law[g, G_KT],
+            grp_law[g, G_CT],
+            mu,
+            pp_hist,
+            p,
+            hist_dt,
         )
         force[ba, 0] += fx
         force[ba, 1] += fy
@@ -740,11 +772,22 @@ def compute_forces(
         for a in range(p, q_end):
             if wp_keep[a]:
                 facet_sum[wp_f[a]] += share_weight(wp_delta[a])
+        # The law's constants depend on the body and the wall only: computed once per run of
+        # contacts with the same wall.
+        law_wall = -1
+        k_n = k_t = c_n = c_t = 0.0
         for a in range(p, q_end):
             if not wp_keep[a]:
                 continue
             f = wp_f[a]
             w = f_wall[f]
+            if w != law_wall:
+                e_w = wall_mat[w, W_E]
+                k_n = diameter[b] * E * e_w / (E + e_w)
+                k_t = wall_mat[w, W_KT] * k_n
+                c_n = 2.0 * wall_mat[w, W_ZETA] * math.sqrt(k_n * mass[b])
+                c_t = 2.0 * wall_mat[w, W_ZETA] * math.sqrt(k_t * mass[b])
+                law_wall = w
             delta = wp_delta[a]
             nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
             cx = wp_cp[a, 0] - 0.5 * delta * nx
@@ -754,11 +797,6 @@ def compute_forces(
             vx = vel[b, 0] + omega[b, 1] * raz - omega[b, 2] * ray - wall_vel[w, 0]
             vy = vel[b, 1] + omega[b, 2] * rax - omega[b, 0] * raz - wall_vel[w, 1]
             vz = vel[b, 2] + omega[b, 0] * ray - omega[b, 1] * rax - wall_vel[w, 2]
-            e_w = wall_mat[w, W_E]
-            k_n = diameter[b] * E * e_w / (E + e_w)
-            k_t = wall_mat[w, W_KT] * k_n
-            c_n = 2.0 * wall_mat[w, W_ZETA] * math.sqrt(k_n * mass[b])
-            c_t = 2.0 * wall_mat[w, W_ZETA] * math.sqrt(k_t * mass[b])
             weight = share_weight(delta) / facet_sum[f]
             fx, fy, fz, _ = sphere_contact_force(
                 nx,
@@ -842,6 +880,7 @@ def run_steps(
     pp_delta,
     pp_n,
     grp_sum,
+    grp_law,
     new_i,
     new_j,
     new_hist,
@@ -898,6 +937,9 @@ def run_steps(
             pp_j,
             pp_hist,
             pp_group,
+            grp_law,
+            mass,
+            diameter,
             new_i,
             new_j,
             new_hist,
@@ -945,6 +987,7 @@ def run_steps(
             pp_delta,
             pp_n,
             grp_sum,
+            grp_law,
             cnt,
             tri,
             f_start,
@@ -1000,6 +1043,9 @@ def run_steps(
                 pp_j,
                 pp_hist,
                 pp_group,
+                grp_law,
+                mass,
+                diameter,
                 new_i,
                 new_j,
                 new_hist,
@@ -1047,6 +1093,7 @@ def run_steps(
             pp_delta,
             pp_n,
             grp_sum,
+            grp_law,
             cnt,
             tri,
             f_start,

@@ -375,6 +375,7 @@ class Simulation:
             self._pp_delta,
             self._pp_n,
             self._grp_sum,
+            self._grp_law,
             self._new_i,
             self._new_j,
             self._new_hist,
@@ -433,6 +434,7 @@ class Simulation:
             self._tmp = np.zeros(ns, dtype=np.int64)
             self._lb = np.zeros(3)
         p = self.params
+        old_par = getattr(self, "_par", None)
         self._par = np.zeros(K.N_PAR)
         self._par[[K.P_E, K.P_ZETA, K.P_MU, K.P_KT]] = p.E, p.damping_ratio, p.mu, p.tangential_ratio
         self._par[K.P_SKIN] = skin
@@ -442,6 +444,9 @@ class Simulation:
         self._par[K.P_LO : K.P_LO + 3] = self.domain_min
         self._par[K.P_HI : K.P_HI + 3] = self.domain_max
         self._par[K.P_CELL_MIN] = 2.0 * r_max + skin
+        law = [K.P_E, K.P_ZETA, K.P_KT]
+        if old_par is not None and not np.array_equal(old_par[law], self._par[law]):
+            self._stale = True  # the body pairs' law constants are computed at list builds
 
     def _wall_arrays(self) -> None:
         n = len(self.walls)
@@ -477,6 +482,7 @@ class Simulation:
                 ("_pp_delta", cap_pp),
                 ("_pp_n", (cap_pp, 3)),
                 ("_grp_sum", cap_pp),
+                ("_grp_law", (cap_pp, 4)),
                 ("_new_hist", (cap_pp, 3)),
             ):
                 grown(name, shape, np.float64, 0)
