@@ -6,9 +6,9 @@ them, ``tell(genes, F)`` hands back their objectives. It never calls a simulatio
   MOGA: one-point crossover (``SinglePointCrossover``, probability ``ga.crossover_prob``),
   polynomial mutation with ``ga.mutation_prob`` per gene, binary tournament selection, duplicate
   elimination. ``ga.population`` individuals first, then ``ga.offspring`` per generation.
-- ``spea2`` (strength Pareto with an archive) and ``agemoea`` (survival by an estimated front
-  geometry): pymoo's, with the same operators. SMS-EMOA is not offered: pymoo 0.6.2's instance
-  cannot be pickled, so its state could not survive a restart.
+- ``spea2``: pymoo's strength Pareto EA (an elitist archive), with the same operators.
+  Not offered: SMS-EMOA (pymoo 0.6.2's instance cannot be pickled, so its state could not
+  survive a restart) and AGE-MOEA (its numba kernels compile for about 20 s in every process).
 - ``random``: uniform random search with the same batch sizes: the honest baseline.
 
 Genes live in [0, 1] (see ``optimizer/space.py``). Randomness comes only from the generator
@@ -75,8 +75,6 @@ class PymooSearch:
         )
         if settings.algorithm == "spea2":
             from pymoo.algorithms.moo.spea2 import SPEA2 as Algorithm
-        elif settings.algorithm == "agemoea":
-            from pymoo.algorithms.moo.age import AGEMOEA as Algorithm
         else:
             from pymoo.algorithms.moo.nsga2 import NSGA2 as Algorithm
         self.algorithm = Algorithm(**operators)

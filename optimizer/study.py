@@ -170,11 +170,10 @@ class Experiment(_Strict):
 class GASettings(_Strict):
     """The genetic algorithm: pymoo's NSGA-II with the paper's operators by default."""
 
-    algorithm: Literal["nsga2", "spea2", "agemoea", "random"] = Field(
+    algorithm: Literal["nsga2", "spea2", "random"] = Field(
         "nsga2",
-        description="'nsga2' (the paper's elitist MOGA), 'spea2' (strength Pareto archive), "
-        "'agemoea' (adaptive geometry estimation), or 'random' (uniform random search with the "
-        "same budget: the honest baseline).",
+        description="'nsga2' (the paper's elitist MOGA), 'spea2' (strength Pareto archive), or "
+        "'random' (uniform random search with the same budget: the honest baseline).",
     )
     population: int = Field(50, ge=2, description="Initial population (simulated in generation 0).")
     offspring: int = Field(15, ge=1, description="New individuals per generation.")

@@ -13,7 +13,7 @@ def objectives(genes):
     return np.column_stack([np.abs(genes[:, 0] - 0.3), genes[:, 1]])
 
 
-@pytest.mark.parametrize("algorithm", ["nsga2", "spea2", "agemoea", "random"])
+@pytest.mark.parametrize("algorithm", ["nsga2", "spea2", "random"])
 def test_batches_are_population_then_offspring(algorithm):
     search = create_search(GASettings(algorithm=algorithm, population=10, offspring=4), n_genes=4, seed=1)
 
