@@ -5,6 +5,7 @@ trial page's discharge curve and replay, and creating a study from the form."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import pytest
 
@@ -57,11 +58,17 @@ def test_pareto_plot_has_a_point_per_trial_and_highlights_the_front(page, dashbo
     save_screenshot(page, "dashboard-study")
 
 
-def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
-    definition = parse_study({"name": "live", "scenario": {}, "experiment": {"measured": [4]}})
+def running_study(dashboard, name: str, trials: int = 6) -> str:
+    """A new study of the seeded owner, status running, with ``trials`` finished trials."""
+    definition = parse_study({"name": name, "scenario": {}, "experiment": {"measured": [4]}})
     study_id = dashboard.store.create_study(definition.model_dump(mode="json"), owner="alice")
     dashboard.store.set_status(study_id, StudyStatus.RUNNING)
-    add_finished_trials(dashboard.store, study_id, generation=0, first_individual=0, count=6)
+    add_finished_trials(dashboard.store, study_id, generation=0, first_individual=0, count=trials)
+    return study_id
+
+
+def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
+    study_id = running_study(dashboard, "live")
     polls = []
     page.on("response", lambda response: polls.append(response) if "updated_since=" in response.url else None)
     page.goto(dashboard.url(f"/studies/{study_id}"))
@@ -75,6 +82,37 @@ def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
     sent = {item["id"] for response in polls for item in response.json()["items"]}
     assert polls, "the page never polled with updated_since"
     assert sent == set(new_ids)
+
+
+def test_pause_and_resume_buttons_change_the_study_through_the_api(page, dashboard):
+    study_id = running_study(dashboard, "pausable")
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function(PLOTTED, arg="pareto-plot")
+
+    page.click("#btn-pause")
+    page.wait_for_function("() => document.getElementById('study-status').textContent === 'paused'")
+    paused = dashboard.store.get_study(study_id).status
+    resume_enabled = page.is_enabled("#btn-resume")
+    page.click("#btn-resume")
+    page.wait_for_function("() => document.getElementById('study-status').textContent === 'running'")
+
+    assert paused == "paused"
+    assert resume_enabled
+    assert dashboard.store.get_study(study_id).status == "running"
+
+
+def test_export_csv_downloads_every_trial(page, dashboard):
+    study_id = running_study(dashboard, "exported", trials=7)
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function(PLOTTED, arg="pareto-plot")
+
+    with page.expect_download() as download:
+        page.click("#btn-export-csv")
+
+    lines = Path(download.value.path()).read_text().strip().splitlines()
+    assert download.value.suggested_filename == f"{study_id}-trials.csv"
+    assert lines[0].startswith("trial_id,")
+    assert len(lines) == 1 + 7
 
 
 def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dashboard):
