@@ -27,7 +27,6 @@ from fastapi.responses import JSONResponse
 
 from api.deps import ApiKeyDep, SettingsDep, StoreDep
 from api.errors import NotFoundError
-from dem.scenarios.render import SnapshotError, load_run
 
 SNAPSHOT_SUBDIR = "snapshots"
 POSITION_DECIMALS = 4  # metres: 0.1 mm, far below an item's size
@@ -43,6 +42,10 @@ def snapshot_dir(data_dir: Path, trial_id: str) -> Path:
 
 def replay_document(directory: Path, max_frames: int) -> dict[str, Any]:
     """The replay JSON of one snapshot directory (raises SnapshotError if it is incomplete)."""
+    # Imported on use: the API process needs the DEM's snapshot reader only for this route, so
+    # creating the app does not depend on the scenario modules.
+    from dem.scenarios.render import load_run
+
     run = load_run(directory)
     step = max(1, int(np.ceil(len(run.frames) / max_frames)))
     frames = run.frames[::step]
@@ -76,6 +79,8 @@ def trial_replay(
     max_frames: Annotated[int, Query(ge=2, le=5000, description="Most frames to send.")] = 400,
 ) -> JSONResponse:
     """The trial's snapshot frames (top-view replay); 404 when the trial kept none."""
+    from dem.scenarios.render import SnapshotError
+
     store.get_study(study_id, principal.visible_to)
     row = store.get_trial(study_id, trial_id)
     directory = snapshot_dir(settings.data_dir, row.id)
