@@ -1,9 +1,10 @@
 """Make the README's dashboard pictures: ``docs/dashboard-study.png`` and ``docs/dashboard-replay.png``.
 
-    python tests/dashboard/screenshots.py --snapshots RUN_DIR [--out docs]
+    python tests/dashboard/screenshots.py [--snapshots RUN_DIR] [--out docs]
 
 RUN_DIR is a snapshot directory of a real feeder run (``demcal simulate CONFIG --snapshots
-RUN_DIR``; its ``summary.json`` holds the result). The script seeds a paper-sized synthetic
+RUN_DIR``; its ``summary.json`` holds the result); without it only the study picture is made.
+The script seeds a paper-sized synthetic
 study (50 + 9 x 15 trials, see ``seed.py``) through the real store, makes that real run one of
 its trials (parameters, result and snapshots), serves the real app and photographs the study page
 and that trial's page in headless Debian Chromium at laptop size. Not part of the test suite.
@@ -31,7 +32,7 @@ REPLAY_INDIVIDUAL = 57  # a generation-1 individual: the run shows up among the 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--snapshots", type=Path, required=True, help="snapshot directory of a real run")
+    parser.add_argument("--snapshots", type=Path, help="snapshot directory of a real run")
     parser.add_argument("--out", type=Path, default=REPO / "docs")
     args = parser.parse_args()
 
@@ -41,15 +42,17 @@ def main() -> None:
     from api.app import create_app
     from api.settings import load_settings
 
-    real = SimulationResult.model_validate(json.loads((args.snapshots / "summary.json").read_text()))
+    real = {}
+    if args.snapshots:
+        summary = json.loads((args.snapshots / "summary.json").read_text())
+        real[REPLAY_INDIVIDUAL] = SimulationResult.model_validate(summary)
     with tempfile.TemporaryDirectory() as tmp:
         url = f"sqlite:///{Path(tmp) / 'demcal.db'}"
         store = migrated_store(url)
-        study = seed_study(
-            store, population=50, offspring=15, generations=9, real_results={REPLAY_INDIVIDUAL: real}
-        )
+        study = seed_study(store, population=50, offspring=15, generations=9, real_results=real)
         trial = study.trial_ids[REPLAY_INDIVIDUAL]
-        shutil.copytree(args.snapshots, Path(tmp) / "data" / "snapshots" / trial)
+        if args.snapshots:
+            shutil.copytree(args.snapshots, Path(tmp) / "data" / "snapshots" / trial)
         settings = load_settings(database_url=url, data_dir=Path(tmp) / "data")
         port = _free_port()
         server = uvicorn.Server(uvicorn.Config(create_app(settings), port=port, log_level="warning"))
@@ -66,6 +69,9 @@ def main() -> None:
             page.wait_for_function("() => performance.getEntriesByName('demcal:plots-drawn').length > 0")
             page.wait_for_timeout(500)
             page.screenshot(path=str(args.out / "dashboard-study.png"), full_page=True)
+            print(f"wrote {args.out / 'dashboard-study.png'}")
+            if not args.snapshots:
+                return
             page.goto(f"{base}/trials/{trial}")
             page.wait_for_selector("#trial[data-loaded='1']")
             # A moment of the run where items are still moving, not the (often empty) last frame.
@@ -73,9 +79,7 @@ def main() -> None:
             page.fill("#replay-frame", str(int(frames * 0.55)))
             page.dispatch_event("#replay-frame", "input")
             page.screenshot(path=str(args.out / "dashboard-replay.png"), full_page=True)
-            browser.close()
-        server.should_exit = True
-    print(f"wrote {args.out / 'dashboard-study.png'} and {args.out / 'dashboard-replay.png'}")
+            print(f"wrote {args.out / 'dashboard-replay.png'}")
 
 
 if __name__ == "__main__":
