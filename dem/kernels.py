@@ -20,6 +20,11 @@ resolution rule of ``dem/contact.py`` shares the pair's stiffness among them); s
 by (sphere, facet). Tangential history lives in an array parallel to each list and is carried
 across rebuilds by merging the two sorted lists.
 
+Per step, the work that only changes at a build is not redone: each body pair's contact-law
+constants (``grp_law``) are computed when the lists are built, and a sphere-facet pair whose
+distance from the facet's plane (precomputed in ``dem/walls.py``) exceeds the sphere's radius is
+dismissed before the closest-point test on each of its triangles.
+
 Nothing here allocates per step; arrays come from ``dem/simulation.py`` which also decides
 what a status code means. The kernels never raise for physics: they return a status.
 """
