@@ -211,6 +211,15 @@ def test_new_study_form_creates_a_study_from_toml(page, dashboard):
     page.wait_for_function("() => document.getElementById('study-name').textContent === 'from-the-form'")
 
 
+def test_new_study_form_starter_definition_is_accepted_as_it_is(page, dashboard):
+    page.goto(dashboard.url("/new"))
+
+    page.click("#new-study button[type=submit]")
+
+    page.wait_for_url(re.compile(r"/studies/st-[0-9a-f]+$"))
+    page.wait_for_function("() => document.getElementById('study-name').textContent === 'quick-feeder'")
+
+
 def test_new_study_form_shows_the_api_message_for_an_invalid_definition(page, dashboard):
     page.goto(dashboard.url("/new"))
     invalid = "[experiment]\nmeasured = [3]\n[scenario]\n[parameters]\nnu = { low = 0.1, high = 0.7 }\n"

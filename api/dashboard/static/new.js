@@ -4,28 +4,32 @@
 
 import { api, apiKey, el, showBanner } from "./api.js";
 
+// examples/study-quick.toml with its scenario (examples/feeder-quick.toml) inline: the server
+// reads no file a request names, so scenario_path cannot be used here.
 const STARTER = `# A calibration study: what to simulate, what to search, what to match.
-# The same document \`demcal calibrate\` reads; the scenario goes inline as [scenario].
-name = "feeder-quick"
-description = "Quick feeder, 10 items"
-objective_time = "cost"   # f2: "cost" (machine-independent) or "wall" (T in seconds, as the paper)
+# The same document \`demcal calibrate\` reads, with the feeder configuration inline as [scenario].
+name = "quick-feeder"
+description = "A demonstration study on the 10-item quick feeder"
+seed = 1
 replicates = 1
+objective_time = "cost"   # f2: "cost" (machine-independent) or "wall" (T in seconds, as the paper)
+trial_timeout_s = 300
+
+[parameters]
+E = { low = 1.0e5, high = 3.0e6 }   # Pa, searched on a log scale
+nu = { fixed = 0.3 }
+e = { low = 0.1, high = 0.9 }
+mu = { low = 0.1, high = 1.0 }
 
 [experiment]
-measured = [2, 3, 3, 4, 4, 5, 6]   # N_t of each experiment (items left in the tray)
+measured = [0, 1, 1, 2, 2, 3, 5]   # N_t of each experiment (items left in the tray)
 aggregate = "median"
 round = "half_up"
 tolerance = 0.5
 
-[parameters]
-E = { low = 1.0e5, high = 1.0e9 }   # Pa, searched on a log scale
-nu = { low = 0.0, high = 0.49 }
-e = { low = 0.05, high = 0.95 }
-mu = { low = 0.05, high = 1.0 }
-
 [ga]
-population = 12
-offspring = 6
+population = 8
+offspring = 4
 generations = 3
 
 [scenario.items]

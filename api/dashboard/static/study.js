@@ -142,14 +142,20 @@ async function renderRecommendation() {
 
 async function refresh() {
   const first = study === null;
-  study = await api(base);
+  let changed;
   if (first) {
+    // The first load reads the study and the trials at once. Later polls read the study first:
+    // a study seen finished must not stop polling before its last trial changes were read.
+    [study, changed] = await Promise.all([api(base), loadTrialChanges()]);
     // Pareto membership is computed on the study's own f2, so show that axis first.
     document.getElementById("pareto-x").value =
       study.definition?.objective_time === "wall" ? "wall_time_s" : "cost";
+    renderHeader();
+  } else {
+    study = await api(base);
+    renderHeader();
+    changed = await loadTrialChanges();
   }
-  renderHeader();
-  const changed = await loadTrialChanges();
   if (changed) await renderPlots();
   if (changed || study.progress.generation !== recommendationGeneration) {
     await renderRecommendation();
