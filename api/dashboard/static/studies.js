@@ -50,7 +50,8 @@ async function refresh() {
   const status = document.getElementById("status-filter").value;
   const query = new URLSearchParams({ limit: 100 });
   if (status) query.set("status", status);
-  const items = itemsOf(await api(`/studies?${query}`));
+  const page = await api(`/studies?${query}`);
+  const items = itemsOf(page);
   const studies = await Promise.all(items.map(detailOf));
   const tbody = document.querySelector("#studies tbody");
   tbody.replaceChildren(...(items.length
@@ -58,7 +59,8 @@ async function refresh() {
     : [el("tr", {}, el("td", { colspan: 7, class: "muted" },
         "No studies yet. Create one on ", el("a", { href: "/new", text: "New study" }),
         " or run `demcal calibrate STUDY.toml`."))]));
-  document.getElementById("updated").textContent = `updated ${new Date().toLocaleTimeString()}`;
+  const shown = page.total > items.length ? `newest ${items.length} of ${page.total} studies` : `${items.length} studies`;
+  document.getElementById("updated").textContent = `${shown} · updated ${new Date().toLocaleTimeString()}`;
   clearBanner();
 }
 
