@@ -4,9 +4,9 @@
 import { PARAMETERS, fmt } from "./api.js";
 
 // Above this many points SVG gets slow; WebGL (scattergl) draws 10,000 points in milliseconds.
-export const WEBGL_ABOVE = 1500;
+const WEBGL_ABOVE = 1500;
 
-export const COLORSCALE = "Viridis"; // perceptually uniform and colour-blind safe
+const COLORSCALE = "Viridis"; // perceptually uniform and colour-blind safe
 const INK = "#1b1f24";
 const GRID = "#e3e6ea";
 const MEDIAN = "#d55e00"; // Okabe-Ito vermillion
@@ -36,7 +36,7 @@ function jitter(trial) {
   return ((n % 1000) / 1000 - 0.5) * 0.5;
 }
 
-export function median(values) {
+function median(values) {
   const v = values.filter((x) => Number.isFinite(x)).sort((a, b) => a - b);
   if (!v.length) return null;
   const mid = Math.floor(v.length / 2);
@@ -81,7 +81,7 @@ function fromZero(trials, value) {
   return [-0.06 * top, 1.06 * top];
 }
 
-export const X_AXES = {
+const X_AXES = {
   wall_time_s: { title: "computation time T (s)", value: (t) => t.wall_time_s },
   cost: { title: "cost (sphere-steps + contact-steps)", value: (t) => t.cost },
 };
