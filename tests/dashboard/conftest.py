@@ -102,18 +102,26 @@ def browser():
         browser.close()
 
 
-@pytest.fixture
-def page(browser, dashboard):
-    """A fresh laptop-sized tab whose localStorage holds the seeded owner's API key; page errors
-    are collected in ``page.errors`` so a test can assert there were none."""
+@pytest.fixture(scope="session")
+def browser_context(browser, dashboard):
+    """One laptop-sized browser profile whose localStorage holds the seeded owner's API key.
+    Shared by the tests so that plotly.min.js comes from the HTTP cache after the first page,
+    as it does for a user; the pages keep no other state."""
     context = browser.new_context(viewport={"width": 1440, "height": 900})
     context.add_init_script(f"localStorage.setItem('demcal.apiKey', {dashboard.study.api_key!r})")
-    tab = context.new_page()
+    yield context
+    context.close()
+
+
+@pytest.fixture
+def page(browser_context):
+    """A fresh tab; page errors are collected in ``page.errors`` so a test can assert there were none."""
+    tab = browser_context.new_page()
     tab.set_default_timeout(15_000)
     tab.errors = []
     tab.on("pageerror", lambda error: tab.errors.append(str(error)))
     yield tab
-    context.close()
+    tab.close()
 
 
 def save_screenshot(page, name: str) -> Path:
