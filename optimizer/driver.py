@@ -151,6 +151,10 @@ class Driver:
             study.status = StudyStatus.RUNNING
 
         records = self.store.trials(study_id)
+        if study.generation > context.last_batch:
+            # The last batch was saved but the process stopped before marking the study done.
+            self.store.set_status(study_id, StudyStatus.DONE, study.message)
+            return self._progress(self.store.load_study(study_id), context, records, 0)
         batch = self._current_batch(study, context, records)
         self._submit(study_id, batch, records)
         recorded = sum(self.store.record_result(outcome) for outcome in self.executor.poll(timeout))

@@ -170,3 +170,15 @@ def test_other_algorithms_run_the_same_budget(algorithm):
 
     assert progress.status is StudyStatus.DONE
     assert len(store.trials(study_id)) == 20
+
+
+def test_study_whose_last_batch_was_saved_is_finished_on_restart(small_definition):
+    store = MemoryStore()
+    study_id = start(store, small_definition)
+    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    store.set_status(study_id, StudyStatus.RUNNING)  # as if the process stopped before "done"
+
+    progress = Driver(store, SyntheticExecutor()).step(study_id, timeout=0)
+
+    assert progress.status is StudyStatus.DONE
+    assert len(store.trials(study_id)) == 20 and store.load_study(study_id).generation == 4
