@@ -13,7 +13,7 @@ a generation of real trials speeds up with a second worker.
    processes. Speedup = elapsed(1) / elapsed(2). Goal: at least 1.8 on 2 free cores. A warm-up
    trial first fills numba's on-disk cache so that neither run pays compilation.
 
-Run: ``python benchmarks/queue.py [--jobs 1000] [--trials 6] [--skip-speedup]``
+Run: ``python benchmarks/queue.py [--jobs 1000] [--trials 12] [--skip-speedup]``
 (needs Redis; ``--redis redis://127.0.0.1:6379/14`` by default, a database it flushes).
 """
 
@@ -121,9 +121,17 @@ def overhead(url: str, jobs: int, workers: int) -> dict:
     }
 
 
+# The quick example with its time step forced to a value that divides its stage times: the
+# automatic step can leave a sub-step remainder at the end of a stage on which the feeder's
+# stage loop does not advance (reported to the engine; remove this once it is fixed).
+FORCED_DT = 2.5e-5
+
+
 def quick_scenario() -> dict:
     with (ROOT / "examples" / "feeder-quick.toml").open("rb") as handle:
-        return tomllib.load(handle)
+        scenario = tomllib.load(handle)
+    scenario.setdefault("run", {})["dt"] = FORCED_DT
+    return scenario
 
 
 def generation_params(count: int) -> list[dict]:
@@ -132,6 +140,7 @@ def generation_params(count: int) -> list[dict]:
     for i in range(count):
         u = (i + 0.5) / count
         sets.append({"E": 10 ** (6 + u), "nu": 0.1 + 0.3 * u, "e": 0.2 + 0.6 * (1 - u), "mu": 0.3 + 0.4 * u})
+    # E stays within 1e6-1e7 Pa, where the forced step is below the automatic one (stable).
     return sets
 
 
@@ -167,7 +176,7 @@ def main() -> None:
         "--redis", default="redis://127.0.0.1:6379/14", help="a Redis database this may flush"
     )
     parser.add_argument("--jobs", type=int, default=1000)
-    parser.add_argument("--trials", type=int, default=6)
+    parser.add_argument("--trials", type=int, default=12)
     parser.add_argument("--skip-speedup", action="store_true")
     args = parser.parse_args()
     preload()  # forked workers start with the simulation stack loaded, as `demcal worker` does
