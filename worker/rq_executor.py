@@ -43,15 +43,13 @@ from typing import Any
 
 from redis import Redis
 from rq import Queue, Retry
-from rq.command import send_stop_job_command
-from rq.exceptions import InvalidJobOperation, NoSuchJobError
 from rq.job import Job, JobStatus
 from rq.registry import FailedJobRegistry, StartedJobRegistry
 from rq.serializers import JSONSerializer
 
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import TrialOutcome, TrialSpec
-from worker.rq_job import results_key
+from worker.rq_job import cancel_key, results_key
 
 logger = logging.getLogger(__name__)
 
@@ -73,6 +71,8 @@ TIMEOUT_SAFETY = 4.0
 RESULT_TTL_S = 24 * 3600
 FAILURE_TTL_S = 7 * 24 * 3600
 ACTIVE_STATES = frozenset({JobStatus.QUEUED, JobStatus.STARTED, JobStatus.SCHEDULED, JobStatus.DEFERRED})
+# A cancel request outlives any trial it could concern.
+CANCEL_TTL_S = 24 * 3600
 # How many results one LPOP takes at most from a study's list.
 POP_BATCH = 500
 
@@ -194,6 +194,7 @@ class RqExecutor:
         with self._redis.pipeline() as pipe:
             # A trial submitted again after it failed must not be reported failed again by poll.
             pipe.zrem(failed.key, *[spec.trial_id for spec in fresh])
+            pipe.delete(*[cancel_key(spec.trial_id) for spec in fresh])
             self._queue.enqueue_many(jobs, pipeline=pipe)
             pipe.execute()
         for spec in fresh:
@@ -217,7 +218,10 @@ class RqExecutor:
             outcomes = self._take_results(block=timeout)
         fresh = []
         for outcome in outcomes:
-            if outcome.trial_id in self._reported or outcome.trial_id in self._cancelled:
+            # A cancelled simulation is not a result: if the trial is still wanted (a study paused
+            # then resumed), reconciliation submits it again.
+            cancelled = outcome.result.status is SimulationStatus.CANCELLED
+            if cancelled or outcome.trial_id in self._reported or outcome.trial_id in self._cancelled:
                 logger.info("trial %s: dropped a duplicate or cancelled result", outcome.trial_id)
                 continue
             self._reported.add(outcome.trial_id)
@@ -248,20 +252,17 @@ class RqExecutor:
         return ids
 
     def cancel(self, trial_ids: Sequence[str]) -> None:
-        """Remove queued jobs and stop running ones; their outcomes are never reported."""
-        for trial in trial_ids:
-            self._cancelled.add(trial)
-            try:
-                job = Job.fetch(trial, connection=self._redis, serializer=JSONSerializer)
-            except NoSuchJobError:
-                continue
-            status = job.get_status(refresh=False)
-            if status == JobStatus.STARTED:
-                try:
-                    send_stop_job_command(self._redis, trial, serializer=JSONSerializer)
-                except InvalidJobOperation:
-                    logger.debug("trial %s: finished before it could be stopped", trial)
-            elif status in ACTIVE_STATES:
+        """Remove queued jobs and ask workers to stop running ones (between two chunks of the
+        simulation); outcomes of cancelled trials are never reported."""
+        if not trial_ids:
+            return
+        self._cancelled.update(trial_ids)
+        with self._redis.pipeline(transaction=False) as pipe:
+            for trial in trial_ids:
+                pipe.set(cancel_key(trial), 1, ex=CANCEL_TTL_S)
+            pipe.execute()
+        for job in Job.fetch_many(list(trial_ids), connection=self._redis, serializer=JSONSerializer):
+            if job is not None and job.get_status(refresh=False) in (JobStatus.QUEUED, JobStatus.SCHEDULED):
                 job.cancel()
         logger.info("cancelled %d trials", len(trial_ids))
 

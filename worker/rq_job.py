@@ -8,6 +8,8 @@ itself is ``worker.jobs.run_trial``; this module wraps it for RQ:
   delivered and the job succeeds, so RQ never retries physics;
 * only an exception escaping ``run_trial`` (a lost connection, memory exhausted, a bug) fails the
   job, and RQ retries it the bounded number of times the executor asked for;
+* a cancelled trial (``RqExecutor.cancel`` sets its cancel key) stops between two chunks of the
+  simulation and delivers a ``cancelled`` result, which the executor never reports;
 * the result is pushed onto the study's result list (``results_key``); the service's
   ``RqExecutor`` pops it, and a pop is atomic, so each pushed result is taken exactly once. A
   trial that ran twice (a worker presumed dead that was only slow) pushes twice; the store keeps
@@ -36,6 +38,30 @@ RESULT_LIST_TTL_S = 7 * 24 * 3600
 def results_key(queue_name: str, study_id: str) -> str:
     """The Redis list holding finished results of one study's trials on one queue."""
     return f"demcal:results:{queue_name}:{study_id}"
+
+
+def cancel_key(trial_id: str) -> str:
+    """Set by the executor to ask the worker running this trial to stop it."""
+    return f"demcal:cancel:{trial_id}"
+
+
+class CancellationCheck:
+    """``should_stop`` for the simulation: True once the trial's cancel key exists. Redis is
+    asked at most every ``every_s`` seconds, the simulation calls it between every two chunks."""
+
+    def __init__(self, job: Job, trial_id: str, every_s: float = 1.0) -> None:
+        self._redis = job.connection
+        self._key = cancel_key(trial_id)
+        self._every_s = every_s
+        self._next = 0.0
+        self._stopped = False
+
+    def __call__(self) -> bool:
+        now = time.monotonic()
+        if not self._stopped and now >= self._next:
+            self._next = now + self._every_s
+            self._stopped = bool(self._redis.exists(self._key))
+        return self._stopped
 
 
 def deliver(job: Job, spec: dict[str, Any], result: dict[str, Any]) -> None:
@@ -79,7 +105,7 @@ def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
         attempt(job),
     )
     started = time.perf_counter()
-    result = run_trial(spec)
+    result = run_trial(spec, should_stop=CancellationCheck(job, spec["trial_id"]))
     deliver(job, spec, result)
     logger.info(
         "trial %s: %s, N_t=%s of %s, %.1f s wall%s",

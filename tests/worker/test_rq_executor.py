@@ -9,6 +9,8 @@ simulation through this path is covered in ``tests/e2e/``.
 from __future__ import annotations
 
 import json
+import multiprocessing
+import time
 
 import pytest
 import redis
@@ -26,7 +28,7 @@ from worker.rq_executor import (
     estimated_time_step,
     job_timeout,
 )
-from worker.rq_job import deliver, results_key
+from worker.rq_job import CancellationCheck, deliver, results_key
 from worker.runner import build_worker
 
 pytestmark = pytest.mark.redis
@@ -39,6 +41,12 @@ def stand_in_trial(spec: dict) -> dict:
     behaviour = spec["scenario"].get("behaviour", "ok")
     if behaviour == "raise":
         raise OSError("scratch disk full")
+    if behaviour == "run until cancelled":
+        should_stop = CancellationCheck(get_current_job(), spec["trial_id"], every_s=0.1)
+        deadline = time.monotonic() + 30
+        while not should_stop() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        behaviour = "cancelled" if should_stop() else "ok"
     result = SimulationResult(
         status=SimulationStatus(behaviour),
         n_items=3,
@@ -249,3 +257,36 @@ def test_estimated_time_step_scales_as_one_over_root_e():
     stiff = estimated_time_step({}, {"E": 4e6})
 
     assert stiff == pytest.approx(soft / 2)
+
+
+def test_a_running_trial_is_cancelled_and_its_outcome_never_reported(executor, connection, redis_url):
+    spec = make_spec("s1", 0, behaviour="run until cancelled")
+    executor.submit([spec])
+    worker = multiprocessing.get_context("fork").Process(
+        target=lambda: run_worker_until_empty(redis.Redis.from_url(redis_url))
+    )
+    worker.start()
+    job = Job.fetch(spec.trial_id, connection=connection, serializer=JSONSerializer)
+    deadline = time.monotonic() + 20
+    while job.get_status() != "started" and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+    executor.cancel([spec.trial_id])
+    worker.join(20)
+    outcomes = executor.poll()
+
+    assert worker.exitcode == 0
+    assert outcomes == []
+    assert job.latest_result().return_value["status"] == "cancelled"
+
+
+def test_a_cancelled_simulation_is_never_reported_even_by_another_service(connection):
+    submitter = RqExecutor(connection, QUEUE, job_function=JOB_FUNCTION)
+    submitter.submit([make_spec("s1", 0, behaviour="cancelled")])
+    run_worker_until_empty(connection)
+    other_service = RqExecutor(connection, QUEUE, job_function=JOB_FUNCTION)
+    other_service.watch(["s1"])
+
+    outcomes = other_service.poll()
+
+    assert outcomes == []
