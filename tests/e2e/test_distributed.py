@@ -13,7 +13,7 @@ import trimesh
 from api.db import create_db_engine
 from api.store import SqlStore
 from dem.scenarios.tray import TrayConfig, parametric_tray_mesh
-from tests.e2e.conftest import tiny_study, wait_for
+from tests.e2e.conftest import tiny_scenario, tiny_study, wait_for
 
 pytestmark = [pytest.mark.postgres, pytest.mark.redis, pytest.mark.slow]
 
@@ -41,8 +41,20 @@ def test_serve_and_two_workers_complete_a_study_and_the_api_shows_what_is_stored
     cluster.start_worker("w1")
     cluster.start_worker("w2")
     study_id = cluster.create_study(tiny_study("two-workers"))
+    simulation = cluster.http.post(
+        "/simulations",
+        json={"scenario": tiny_scenario(), "params": {"E": 2e6, "nu": 0.3, "e": 0.5, "mu": 0.4}},
+    )
 
     study = cluster.wait_until_done(study_id)
+    single = wait_for(
+        lambda: (
+            (body := cluster.http.get(f"/simulations/{simulation.json()['id']}").json())["state"] == "done"
+            and body
+        ),
+        60,
+        "the single simulation's result",
+    )
 
     assert study["status"] == "done", study["message"]
     shown = {trial["id"]: trial for trial in assert_every_trial_has_exactly_one_result(cluster, study_id)}
@@ -54,6 +66,21 @@ def test_serve_and_two_workers_complete_a_study_and_the_api_shows_what_is_stored
         assert shown[trial_id]["params"] == pytest.approx(record.spec.params)
         assert shown[trial_id]["worker"] in ("w1", "w2")
     assert study["progress"]["trials_done"] == TRIALS
+    assert simulation.status_code == 202, simulation.text
+    assert single["worker"] in ("w1", "w2")
+    assert single["result"]["status"] == "ok"
+
+
+def test_serve_without_redis_runs_the_study_on_its_local_pool(cluster):
+    del cluster.env["DEMCAL_REDIS_URL"]
+    cluster.env["DEMCAL_WORKERS"] = "2"
+    cluster.start_serve()
+    study_id = cluster.create_study(tiny_study("local-pool"))
+
+    study = cluster.wait_until_done(study_id)
+
+    assert study["status"] == "done", study["message"]
+    assert_every_trial_has_exactly_one_result(cluster, study_id)
 
 
 def test_a_worker_killed_mid_trial_loses_no_trial_and_counts_none_twice(cluster):
