@@ -64,6 +64,29 @@ class CancellationCheck:
         return self._stopped
 
 
+class ProgressLog:
+    """``progress`` for the simulation: one log line per ``every_s`` seconds of wall time, so an
+    operator following a worker's log sees a long trial advance without a line per chunk."""
+
+    def __init__(self, trial_id: str, end_s: float | None, every_s: float = 10.0) -> None:
+        self._trial_id = trial_id
+        self._end = f" of {end_s:g} s" if end_s else ""
+        self._every_s = every_s
+        self._next = time.monotonic() + every_s
+
+    def __call__(self, sim_time: float, items_left: int) -> None:
+        now = time.monotonic()
+        if now >= self._next:
+            self._next = now + self._every_s
+            logger.info(
+                "trial %s: t = %.2f s%s simulated, %d items left",
+                self._trial_id,
+                sim_time,
+                self._end,
+                items_left,
+            )
+
+
 def deliver(job: Job, spec: dict[str, Any], result: dict[str, Any]) -> None:
     """Push one finished trial's result where the executor will take it."""
     envelope = json.dumps(
@@ -105,7 +128,13 @@ def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
         attempt(job),
     )
     started = time.perf_counter()
-    result = run_trial(spec, should_stop=CancellationCheck(job, spec["trial_id"]))
+    stages = spec["scenario"].get("stages") or {}
+    end = stages.get("vibration_start", 0.0) + stages.get("vibration_time", 0.0) if stages else None
+    result = run_trial(
+        spec,
+        should_stop=CancellationCheck(job, spec["trial_id"]),
+        progress=ProgressLog(spec["trial_id"], end),
+    )
     deliver(job, spec, result)
     logger.info(
         "trial %s: %s, N_t=%s of %s, %.1f s wall%s",
