@@ -219,7 +219,7 @@ class StudyService:
             share = self.poll_s / len(self.held)
             for study_id in sorted(self.held):
                 progress = self.driver.step(study_id, timeout=share)
-                if not progress.active and progress.trials_in_flight == 0:
+                if not progress.active:
                     logger.info("study %s: %s; releasing it", study_id, progress.status)
                     self._drop(study_id)
         else:
