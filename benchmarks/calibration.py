@@ -32,7 +32,7 @@ from optimizer.study import load_study_file
 from worker.local import LocalPoolExecutor
 
 ROOT = Path(__file__).resolve().parent.parent
-TRUTH = {"E": 1.0e6, "nu": 0.3, "e": 0.5, "mu": 0.6}
+TRUTH = {"E": 3.0e6, "nu": 0.3, "e": 0.5, "mu": 0.6}
 
 
 def simulate(executor, scenario, params, seeds, label):
@@ -67,9 +67,21 @@ def main() -> None:
     parser.add_argument("--offspring", type=int, default=4)
     parser.add_argument("--generations", type=int, default=3)
     parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument(
+        "--truth", default="", help=f"Hidden parameters to change, e.g. 'mu=0.9,e=0.2' (default: {TRUTH})"
+    )
+    parser.add_argument(
+        "--dt", type=float, default=None, help="Force the feeder's time step (run.dt), s; default: from E."
+    )
     args = parser.parse_args()
+    for item in filter(None, args.truth.split(",")):
+        name, _, value = item.partition("=")
+        TRUTH[name.strip()] = float(value)
 
     base = load_study_file(ROOT / "examples" / "study-quick.toml")
+    if args.dt is not None:
+        scenario = {**base.scenario, "run": {**base.scenario["run"], "dt": args.dt}}
+        base = base.model_copy(update={"scenario": scenario})
     executor = LocalPoolExecutor(args.workers)
     try:
         started = time.monotonic()

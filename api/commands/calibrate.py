@@ -120,7 +120,7 @@ def _run(store, study_id: str, workers: int, results: Path) -> None:
         executor.close()
         message = f"interrupted; resume with: demcal calibrate --resume {study_id}"
         store.set_status(study_id, StudyStatus.PAUSED, message)
-        console.print(f"[yellow]stopped.[/] Finished simulations are kept; {message}")
+        console.print(f"[yellow]stopped.[/] Finished simulations are kept; {message}", soft_wrap=True)
         raise typer.Exit(EXIT_INTERRUPTED) from None
     executor.close()
     if final.status is not StudyStatus.DONE:

@@ -11,15 +11,18 @@ from optimizer.protocols import TrialSpec
 from worker.jobs import run_trial
 
 # Two items, a fraction of a second: the smallest run that still deposits and vibrates.
+# The step is forced: stable for E in 1e6-3e6 Pa, and it divides every stage time, which keeps
+# the run clear of a sub-step remainder at a stage's end.
 TINY_SCENARIO = {
     "items": {"counts": {"smartphone": 1, "camera": 1}, "resolution": 4},
     "stages": {"insertion_time": 0.1, "vibration_start": 0.3, "vibration_time": 0.2},
+    "run": {"dt": 1e-5},
 }
 # Ten minutes simulated, and no early end when the tray empties: always longer than any deadline.
 LONG_SCENARIO = {
     **TINY_SCENARIO,
     "stages": {**TINY_SCENARIO["stages"], "vibration_time": 600.0},
-    "run": {"stop_when_empty": False},
+    "run": {"dt": 1e-5, "stop_when_empty": False},
 }
 PARAMS = {"E": 1e6, "nu": 0.3, "e": 0.5, "mu": 0.5}
 

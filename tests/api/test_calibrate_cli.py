@@ -1,0 +1,165 @@
+"""``demcal calibrate`` end to end on the embedded default: a SQLite file and the local pool
+running real (tiny) feeder simulations; Ctrl-C then ``--resume`` gives an uninterrupted run's
+simulations."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from api.cli import app
+from tests.worker.test_jobs import TINY_SCENARIO
+
+STUDY = """
+name = "tiny"
+seed = 5
+trial_timeout_s = 120
+[scenario.items]
+counts = {{ smartphone = 1, camera = 1 }}
+resolution = 4
+[scenario.stages]
+insertion_time = 0.1
+vibration_start = 0.3
+vibration_time = {vibration_time}
+[scenario.run]
+dt = 1e-5
+[parameters]
+E = {{ low = 1e6, high = 3e6 }}
+nu = {{ fixed = 0.3 }}
+[experiment]
+measured = [1, 1, 2]
+[ga]
+population = {population}
+offspring = 2
+generations = 1
+"""
+
+
+def write_study(folder: Path, population=2, vibration_time=TINY_SCENARIO["stages"]["vibration_time"]) -> Path:
+    path = folder / "study.toml"
+    path.write_text(STUDY.format(population=population, vibration_time=vibration_time))
+    return path
+
+
+def demcal(args, folder: Path) -> subprocess.Popen:
+    """The installed ``demcal`` on a SQLite file in ``folder``, output captured."""
+    env = {
+        **os.environ,
+        "DEMCAL_DATABASE_URL": f"sqlite:///{folder}/demcal.db",
+        "DEMCAL_LOG_LEVEL": "WARNING",
+    }
+    command = [str(Path(sys.executable).parent / "demcal"), *args]
+    return subprocess.Popen(
+        command, cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+
+
+def finish(process: subprocess.Popen, timeout: float) -> str:
+    """Its output once it exits; on timeout it is killed (with its pool) and the test fails."""
+    try:
+        output, _ = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.send_signal(signal.SIGINT)  # the CLI's clean stop also ends its worker processes
+        output, _ = process.communicate(timeout=30)
+        raise AssertionError(f"demcal did not finish within {timeout:g} s:\n{output}") from None
+    return output
+
+
+def store_for(folder: Path):
+    from api.db import create_db_engine
+    from api.store import SqlStore
+
+    return SqlStore(create_db_engine(f"sqlite:///{folder}/demcal.db"))
+
+
+def wait_for_a_result(folder: Path, limit_s: float = 240.0) -> None:
+    from optimizer.protocols import StudyStatus
+
+    end = time.monotonic() + limit_s
+    while time.monotonic() < end:
+        time.sleep(0.5)
+        if not (folder / "demcal.db").exists():
+            continue
+        store = store_for(folder)
+        for study_id in store.studies_in([StudyStatus.RUNNING]):
+            if any(record.result is not None for record in store.trials(study_id)):
+                return
+    raise AssertionError(f"no simulation finished within {limit_s:g} s")
+
+
+@pytest.fixture
+def embedded(tmp_path, monkeypatch):
+    """``demcal`` in this process, on a SQLite file in ``tmp_path``."""
+    from api.settings import get_settings
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("DEMCAL_DATABASE_URL", f"sqlite:///{tmp_path}/demcal.db")
+    get_settings.cache_clear()
+    yield CliRunner()
+    get_settings.cache_clear()
+
+
+def test_bad_study_file_names_the_field(embedded, tmp_path):
+    (tmp_path / "study.toml").write_text(
+        "[experiment]\nmeasured = [1]\n[parameters.nu]\nlow = 0.4\nhigh = 0.2\n"
+    )
+
+    result = embedded.invoke(app, ["calibrate", "study.toml"])
+
+    assert result.exit_code == 2
+    assert "scenario" in result.output and "parameters.nu" in result.output
+
+
+def test_resume_of_an_unknown_study_says_what_to_check(embedded):
+    result = embedded.invoke(app, ["calibrate", "--resume", "st-nope"])
+
+    assert result.exit_code == 2
+    assert "no study 'st-nope'" in result.output
+
+
+@pytest.mark.slow
+def test_tiny_study_runs_and_writes_its_results(tmp_path):
+    write_study(tmp_path)
+
+    process = demcal(["calibrate", "study.toml", "--workers", "2", "--results", "out"], tmp_path)
+    output = finish(process, 300)
+
+    assert process.returncode == 0, output
+    [folder] = (tmp_path / "out").iterdir()
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["status"] == "done" and summary["simulations"] == 2 + 2
+    assert len((folder / "trials.csv").read_text().splitlines()) == 1 + 4
+    assert (folder / "pareto.png").stat().st_size > 0
+    assert "Pareto front" in output
+
+
+@pytest.mark.slow
+def test_ctrl_c_then_resume_runs_exactly_the_planned_simulations(tmp_path):
+    write_study(tmp_path, population=4, vibration_time=1.0)
+    process = demcal(["calibrate", "study.toml", "--workers", "2"], tmp_path)
+    try:
+        wait_for_a_result(tmp_path)
+    finally:
+        process.send_signal(signal.SIGINT)
+    output = finish(process, 60)
+    study_id = next(word for word in output.split() if word.startswith("st-"))
+    store = store_for(tmp_path)
+    kept = {r.spec.trial_id: r.result for r in store.trials(study_id) if r.result is not None}
+    resumed = demcal(["calibrate", "--resume", study_id, "--workers", "2"], tmp_path)
+    resumed_output = finish(resumed, 300)
+
+    trials = {r.spec.trial_id: r.result for r in store.trials(study_id)}
+    assert process.returncode == 130, output
+    assert f"demcal calibrate --resume {study_id}" in output
+    assert resumed.returncode == 0, resumed_output
+    assert f"{len(kept)} simulations already done are kept" in resumed_output
+    assert len(trials) == 4 + 2 and all(result is not None for result in trials.values())
+    assert {tid: trials[tid] for tid in kept} == kept
