@@ -46,9 +46,14 @@ DEFAULT_GRACE_S = 30.0
 MAX_WAIT_S = 0.5
 
 
-def _serve(conn) -> None:
+def _serve(conn, log_level: int) -> None:
     """A worker process: run the specs it receives until told to stop (None) or its pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # A spawned process starts with no logging set up; give the engine's records the parent's
+    # level and a one-line format instead of Python's bare last-resort output.
+    logging.basicConfig(
+        level=log_level, format="%(asctime)s %(levelname)-7s %(name)s[%(process)d]: %(message)s"
+    )
     from worker.jobs import run_trial
 
     while True:
@@ -167,7 +172,12 @@ class LocalPoolExecutor:
 
     def _start(self) -> _Slot:
         parent, child = self._context.Pipe()
-        process = self._context.Process(target=_serve, args=(child,), daemon=True, name="demcal-local-worker")
+        process = self._context.Process(
+            target=_serve,
+            args=(child, logging.getLogger().getEffectiveLevel()),
+            daemon=True,
+            name="demcal-local-worker",
+        )
         process.start()
         child.close()
         slot = _Slot(process, parent)
