@@ -269,7 +269,9 @@ class Simulation:
             self._clk[K.K_T] = max(self.t, until)
             return RunStatus(SimulationStatus.OK, "no bodies", self.t, 0)
         dt = self.dt
-        remaining = int(round((until - self.t) / dt))
+        # Ceil, not round: a stop less than half a step ahead must still be reached, or a caller
+        # looping 'while t < stop: run(until=stop)' would never advance.
+        remaining = max(0, math.ceil((until - self.t) / dt - 1e-9))
         chunk_steps = max(1, int(round(chunk_time / dt)))
         while remaining > 0:
             if should_stop is not None and should_stop():

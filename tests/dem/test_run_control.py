@@ -162,3 +162,15 @@ def test_sphere_on_a_convex_edge_of_two_facets_feels_one_force():
 
     assert sim.walls[0].n_facets == 2
     assert 0.005 - sim.bodies.pos[0, 2] == pytest.approx(body.mass * 9.81 / (PARAMS.E * 0.005), rel=1e-3)
+
+
+def test_stop_less_than_half_a_step_ahead_is_still_reached():
+    sim = Simulation(PARAMS, dt=1e-4, domain_min=(-1, -1, -1), domain_max=(1, 1, 1))
+    sim.add_body(ball(), (0.0, 0.0, 0.5))
+    sim.run(until=0.01)
+    stop = sim.t + 0.3 * sim.dt
+
+    report = sim.run(until=stop)
+
+    assert report.steps == 1
+    assert sim.t >= stop
