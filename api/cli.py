@@ -22,6 +22,8 @@ COMMAND_MODULES = (
     "api.commands.worker",
     "api.commands.serve",
     "api.commands.calibrate",
+    "api.commands.simulate",
+    "api.commands.render",
 )
 
 app = typer.Typer(

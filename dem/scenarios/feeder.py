@@ -1,0 +1,510 @@
+"""The vibration feeder of Kawaguchi et al. (Mater. Trans. 62(4), 2021, chapters 2-3) as a
+configurable simulation: the scenario every calibration runs, and its response N_t.
+
+Protocol (defaults from the paper; every number is a config key, see ``examples/feeder.toml``):
+
+1. Insertion, 0 to ``stages.insertion_time`` (1 s): items are created one after another at
+   random positions and orientations above the inlet region, never overlapping a wall or another
+   item (their oriented bounding boxes are checked), lowest free place first, then fall.
+2. Deposition until ``stages.vibration_start`` (t = 5 s): gravity only.
+3. Vibration for ``stages.vibration_time`` (60 s): the tray translates sinusoidally at
+   ``vibration.frequency`` (60 Hz) with ``vibration.amplitude`` (1.5 mm), along a line inclined
+   ``vibration.angle_deg`` (25 deg) from the horizontal, towards the outlet. The amplitude is a
+   peak amplitude by default (``amplitude_kind = "peak"``: displacement A sin(w t)), which is
+   how the paper's "amplitude of 1.5 mm" reads; ``"peak_to_peak"`` halves it.
+
+An item is discharged when its centre passes the tray's open outlet end (tray-frame
+x > outlet_x, see ``dem/scenarios/tray.py``); its time is recorded and the body removed. N_t is
+the number of items never discharged. With ``run.stop_when_empty`` the run ends when the last
+item left, as the experiment did. The outlet (100 mm) is narrower than a smartphone (146 mm), so
+single-item clogging and bridging are possible, which is the physics the calibration is about.
+
+``run_feeder`` never raises for physics or parameters: a blow-up, a deadline, a cancellation or a
+bad parameter value ends it with the matching status and a message. A bad config is a pydantic
+``ValidationError`` at load time, naming the key.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import tomllib
+from collections.abc import Callable
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from dem.result import SimulationResult, SimulationStatus
+from dem.scenarios.tray import TrayConfig, TrayGeometry, build_tray
+
+logger = logging.getLogger(__name__)
+
+PARAMETER_NAMES = ("E", "nu", "e", "mu")
+GRAVITY = 9.81
+# Share of the inlet region's volume (floor area x wall height) that randomly piled flat items
+# can fill; beyond it the items cannot all be deposited in the inlet region.
+INLET_PACKING_LIMIT = 0.6
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ParamsConfig(_Section):
+    """Contact parameters used when the caller does not give them (the paper's Table 2 area)."""
+
+    E: float = Field(1e7, gt=0, description="Young's modulus, Pa.")
+    nu: float = Field(0.3, gt=-1, lt=0.5, description="Poisson's ratio.")
+    e: float = Field(0.5, gt=0, le=1, description="Restitution coefficient.")
+    mu: float = Field(0.5, ge=0, description="Friction coefficient.")
+
+
+class ItemsConfig(_Section):
+    """Which items are fed: the built-in WEEE set, or the user's meshes from a folder."""
+
+    counts: dict[str, int] = Field(
+        default_factory=lambda: {"smartphone": 10, "feature_phone": 10, "camera": 10},
+        description="Items per kind (built-in kinds, or file stems of the folder's meshes).",
+    )
+    spread: float = Field(0.05, ge=0, le=0.3, description="Relative random spread of dimensions and mass.")
+    resolution: int = Field(12, ge=1, le=400, description="Clump resolution passed to the clump generator.")
+    folder: Path | None = Field(None, description="Folder of STL/OBJ item meshes instead of the built-ins.")
+    masses: dict[str, float] = Field(default_factory=dict, description="Mass per folder mesh stem, kg.")
+
+    @model_validator(mode="after")
+    def _counts_positive(self) -> ItemsConfig:
+        for kind, count in self.counts.items():
+            if count < 0:
+                raise ValueError(f"counts.{kind} is {count}; counts cannot be negative")
+        if sum(self.counts.values()) == 0:
+            raise ValueError("counts: at least one item is needed")
+        return self
+
+
+class StagesConfig(_Section):
+    insertion_time: float = Field(1.0, gt=0, description="Items are created over this time, s.")
+    vibration_start: float = Field(5.0, gt=0, description="End of deposition, start of vibration, s.")
+    vibration_time: float = Field(60.0, ge=0, description="Duration of the vibration, s.")
+
+    @model_validator(mode="after")
+    def _insertion_before_vibration(self) -> StagesConfig:
+        if self.insertion_time > self.vibration_start:
+            raise ValueError(
+                f"insertion_time ({self.insertion_time} s) must not exceed vibration_start "
+                f"({self.vibration_start} s)"
+            )
+        return self
+
+    @property
+    def end(self) -> float:
+        return self.vibration_start + self.vibration_time
+
+
+class VibrationConfig(_Section):
+    frequency: float = Field(60.0, gt=0, le=1000, description="Hz.")
+    amplitude: float = Field(1.5e-3, ge=0, le=0.05, description="Displacement amplitude, m.")
+    amplitude_kind: Literal["peak", "peak_to_peak"] = Field(
+        "peak", description="Whether amplitude is the peak (A in A sin wt) or peak-to-peak (2A)."
+    )
+    angle_deg: float = Field(
+        25.0, ge=0, le=90, description="Inclination from the horizontal, towards the outlet."
+    )
+    ramp_time: float = Field(0.0, ge=0, description="Linear ramp of the amplitude at the start, s.")
+
+    @property
+    def peak_amplitude(self) -> float:
+        return self.amplitude if self.amplitude_kind == "peak" else self.amplitude / 2
+
+    @property
+    def direction(self) -> tuple[float, float, float]:
+        """World direction of the tray's displacement (x towards the outlet, z up)."""
+        a = math.radians(self.angle_deg)
+        return (math.cos(a), 0.0, math.sin(a))
+
+
+class RunConfig(_Section):
+    dt_fraction: float = Field(
+        0.05, gt=0, le=0.5, description="Time step as a fraction of the contact period."
+    )
+    dt: float | None = Field(None, gt=0, description="Force this time step, s (overrides dt_fraction).")
+    stop_when_empty: bool = Field(True, description="End the run when every item has been discharged.")
+    snapshot_interval: float = Field(
+        0.1, gt=0, description="Simulated s between snapshots (with snapshot_dir)."
+    )
+    chunk_time: float = Field(0.01, gt=0, le=1.0, description="Simulated s between discharge checks.")
+
+
+class FeederConfig(_Section):
+    """One vibration feeder experiment, as in ``examples/feeder.toml``."""
+
+    params: ParamsConfig = Field(default_factory=ParamsConfig)
+    tray: TrayConfig = Field(default_factory=TrayConfig)
+    items: ItemsConfig = Field(default_factory=ItemsConfig)
+    stages: StagesConfig = Field(default_factory=StagesConfig)
+    vibration: VibrationConfig = Field(default_factory=VibrationConfig)
+    run: RunConfig = Field(default_factory=RunConfig)
+
+    @model_validator(mode="after")
+    def _items_fit_the_inlet(self) -> FeederConfig:
+        if self.items.folder is not None:
+            return self  # user meshes are measured when they are loaded
+        from dem.scenarios.items import nominal_volume
+
+        bulk = sum(nominal_volume(kind) * count for kind, count in self.items.counts.items())
+        inlet = self.tray.inlet_width * self.tray.inlet_length * self.tray.wall_height
+        if bulk > INLET_PACKING_LIMIT * inlet:
+            raise ValueError(
+                f"items.counts: {sum(self.items.counts.values())} items ({bulk * 1e3:.2f} L) do not fit "
+                f"the inlet region ({inlet * 1e3:.2f} L, at most {INLET_PACKING_LIMIT:.0%} of it can be "
+                "filled); reduce items.counts or enlarge tray.inlet_length, tray.inlet_width or "
+                "tray.wall_height"
+            )
+        return self
+
+
+def load_feeder_config(path: Path | str) -> FeederConfig:
+    """Read and validate a feeder TOML file; relative mesh paths are taken from the file's folder."""
+    path = Path(path)
+    with path.open("rb") as handle:
+        data = tomllib.load(handle)
+    config = FeederConfig.model_validate(data)
+    base = path.resolve().parent
+    if config.tray.mesh_file is not None and not config.tray.mesh_file.is_absolute():
+        config.tray.mesh_file = base / config.tray.mesh_file
+    if config.items.folder is not None and not config.items.folder.is_absolute():
+        config.items.folder = base / config.items.folder
+    return config
+
+
+def demcal_version() -> str:
+    try:
+        return version("demcal")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+Progress = Callable[[float, int], None]
+
+
+def run_feeder(
+    config: FeederConfig,
+    params: dict[str, float],
+    seed: int,
+    *,
+    deadline: float | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    progress: Progress | None = None,
+    snapshot_dir: Path | None = None,
+) -> SimulationResult:
+    """Run one feeder experiment with these contact parameters; never raises.
+
+    ``params`` holds any of E, nu, e, mu (missing ones come from ``config.params``); ``deadline``
+    is a ``time.monotonic()`` value; ``should_stop()`` is polled between chunks; ``progress`` is
+    called with (simulated time, items not yet discharged); ``snapshot_dir`` receives the files
+    ``demcal render`` reads (see ``dem/scenarios/render.py``).
+    """
+    started = time.monotonic()
+    merged = {**config.params.model_dump(), **params}
+    base = {"seed": int(seed), "version": demcal_version()}
+    unknown = sorted(set(params) - set(PARAMETER_NAMES))
+    if unknown:
+        message = f"unknown parameter(s) {', '.join(unknown)}; the feeder takes {', '.join(PARAMETER_NAMES)}"
+        return SimulationResult(
+            status=SimulationStatus.ERROR, message=message, params=_floats(merged), **base
+        )
+    try:
+        checked = ParamsConfig.model_validate(merged).model_dump()
+    except Exception as exc:  # pydantic ValidationError, or a value that is not a number
+        return SimulationResult(
+            status=SimulationStatus.ERROR, message=f"bad parameters: {exc}", params=_floats(merged), **base
+        )
+    try:
+        feeder = _FeederRun(config, checked, int(seed), snapshot_dir)
+        return feeder.execute(started, deadline, should_stop, progress)
+    except Exception as exc:  # the contract: a worker gets a result, never a traceback
+        logger.exception("feeder run failed (seed %s, params %s)", seed, checked)
+        return SimulationResult(
+            status=SimulationStatus.ERROR,
+            message=f"{type(exc).__name__}: {exc}",
+            params=checked,
+            wall_time_s=time.monotonic() - started,
+            **base,
+        )
+
+
+def _floats(values: dict) -> dict[str, float]:
+    """Parameters as floats where they are numbers, so that an error result still validates."""
+    out = {}
+    for key, value in values.items():
+        try:
+            out[str(key)] = float(value)
+        except (TypeError, ValueError):
+            out[str(key)] = float("nan")
+    return out
+
+
+def random_rotation(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A uniformly random orientation: unit quaternion (scalar first) and its rotation matrix."""
+    from dem.scenarios.render import quaternion_matrix
+
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    return q, quaternion_matrix(q[None, :])[0]
+
+
+class _FeederRun:
+    """One run's state: the engine, which body is which item, and what has left the tray."""
+
+    # Gap kept between a new item's bounding box and walls or other items, m.
+    INSERT_GAP = 0.003
+    # The insertion zone reaches this far above the wall top, m.
+    INSERT_ZONE_HEIGHT = 0.25
+    PLACEMENT_TRIES = 64
+    RETRY_INTERVAL = 0.02
+
+    def __init__(self, config: FeederConfig, params: dict[str, float], seed: int, snapshot_dir: Path | None):
+        from dem.contact import ContactParams
+        from dem.motion import SinusoidalTranslation
+        from dem.simulation import Simulation
+        from dem.walls import WallMesh
+
+        self.config = config
+        self.params = params
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.tray: TrayGeometry = build_tray(config.tray)
+        self.items = make_items(config.items, self.rng)
+        self.hulls = [body_frame_hull(item) for item in self.items]
+        n = len(self.items)
+        self.body_of = np.full(n, -1, dtype=np.int64)
+        self.state = np.zeros(n, dtype=np.int8)  # render.NOT_CREATED / IN_TRAY / GONE
+        self.discharge_times: list[float | None] = [None] * n
+        self.escaped: list[int] = []
+        self.emptied_at: float | None = None
+        self.pending = list(range(n))
+
+        lo = self.tray.vertices.min(axis=0)
+        hi = self.tray.vertices.max(axis=0)
+        self.sim = Simulation(
+            ContactParams(E=params["E"], nu=params["nu"], e=params["e"], mu=params["mu"]),
+            gravity=(0.0, 0.0, -GRAVITY),
+            domain_min=tuple(lo - np.array([0.3, 0.3, 0.5])),
+            domain_max=tuple(hi + np.array([0.5, 0.3, self.INSERT_ZONE_HEIGHT + 0.5])),
+            dt=config.run.dt,
+            dt_fraction=config.run.dt_fraction,
+            seed=seed,
+        )
+        vib = config.vibration
+        motion = SinusoidalTranslation(
+            direction=vib.direction,
+            amplitude=vib.peak_amplitude,
+            frequency=vib.frequency,
+            start_time=config.stages.vibration_start,
+            ramp_time=vib.ramp_time,
+        )
+        self.sim.add_wall(WallMesh(self.tray.vertices, self.tray.faces, motion=motion, name="tray"))
+
+        self.writer = None
+        if snapshot_dir is not None:
+            from dem.scenarios.render import SnapshotWriter
+
+            self.writer = SnapshotWriter(
+                snapshot_dir,
+                self.tray.vertices,
+                self.tray.faces,
+                [item.name for item in self.items],
+                [item.kind for item in self.items],
+                self.hulls,
+            )
+        self.next_snapshot = 0.0
+
+    # -- insertion ---------------------------------------------------------------------------
+
+    def _occupied_boxes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Tray-frame bounding boxes of the items in the tray, at their current pose."""
+        from dem.scenarios.render import quaternion_matrix
+
+        boxes = []
+        bodies = self.sim.bodies
+        for i in np.flatnonzero(self.state == 1):
+            b = self.body_of[i]
+            rotation = quaternion_matrix(np.asarray(bodies.quat[b])[None, :])[0]
+            points = self.tray.to_tray_frame(np.asarray(bodies.pos[b]) + self.hulls[i] @ rotation.T)
+            boxes.append((points.min(axis=0), points.max(axis=0)))
+        return boxes
+
+    def _try_insert(self, i: int) -> bool:
+        """Create item i at the lowest free random place above the inlet region, if there is one."""
+        gap = self.INSERT_GAP
+        (x0, x1), (y0, y1) = self.tray.inlet_x, self.tray.inlet_y
+        z_top = self.tray.wall_height + self.INSERT_ZONE_HEIGHT
+        occupied = self._occupied_boxes()
+        best = None
+        for _ in range(self.PLACEMENT_TRIES):
+            quat, rotation = random_rotation(self.rng)
+            local = self.tray.to_tray_frame(self.hulls[i] @ rotation.T)
+            low, high = local.min(axis=0), local.max(axis=0)
+            span_x = (x0 + gap - low[0], x1 - gap - high[0])
+            span_y = (y0 + gap - low[1], y1 - gap - high[1])
+            span_z = (gap - low[2], z_top - high[2])
+            if span_x[0] > span_x[1] or span_y[0] > span_y[1] or span_z[0] > span_z[1]:
+                continue  # this orientation does not fit the inlet footprint at all
+            centre = np.array(
+                [self.rng.uniform(*span_x), self.rng.uniform(*span_y), self.rng.uniform(*span_z)]
+            )
+            box_lo, box_hi = centre + low - gap, centre + high + gap
+            if any(np.all(box_lo < o_hi) and np.all(o_lo < box_hi) for o_lo, o_hi in occupied):
+                continue
+            if best is None or centre[2] < best[0][2]:
+                best = (centre, quat)
+        if best is None:
+            return False
+        centre, quat = best
+        position = self.tray.to_world(centre[None, :])[0]
+        self.body_of[i] = self.sim.add_body(self.items[i].clump, position, quat, np.zeros(3), np.zeros(3))
+        self.state[i] = 1
+        return True
+
+    def _insert_due(self) -> None:
+        """Create every pending item whose insertion time has come, in order, while they fit."""
+        n = len(self.items)
+        interval = self.config.stages.insertion_time / n
+        while self.pending and self.pending[0] * interval <= self.sim.t + 1e-12:
+            if not self._try_insert(self.pending[0]):
+                return
+            self.pending.pop(0)
+
+    def _next_stop(self) -> float:
+        end = self.config.stages.end
+        if not self.pending:
+            return end
+        due = self.pending[0] * self.config.stages.insertion_time / len(self.items)
+        if due > self.sim.t + 1e-12:
+            return min(due, end)
+        return min(self.sim.t + self.RETRY_INTERVAL, end)  # it did not fit: wait for room
+
+    # -- observation ---------------------------------------------------------------------------
+
+    def _observe(self, sim) -> None:
+        """After each chunk: remove discharged items, record times, write snapshots, report."""
+        t = float(sim.t)
+        active = np.asarray(sim.bodies.active)
+        for i in np.flatnonzero(self.state == 1):
+            b = self.body_of[i]
+            if not active[b]:
+                # The engine removed it for leaving the domain other than through the outlet.
+                self.state[i] = 2
+                self.discharge_times[i] = t
+                self.escaped.append(int(i))
+                continue
+            x = self.tray.to_tray_frame(np.asarray(sim.bodies.pos[b])[None, :])[0, 0]
+            if x > self.tray.outlet_x:
+                self.state[i] = 2
+                self.discharge_times[i] = t
+                sim.remove_body(int(b))
+        if self.emptied_at is None and not self.pending and not np.any(self.state == 1):
+            self.emptied_at = t
+        if self.writer is not None and t >= self.next_snapshot - 1e-12:
+            self._snapshot()
+            self.next_snapshot = t + self.config.run.snapshot_interval
+        if self.progress is not None:
+            self.progress(t, self.n_left)
+
+    def _snapshot(self) -> None:
+        n = len(self.items)
+        pos = np.zeros((n, 3))
+        quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        for i in np.flatnonzero(self.state == 1):
+            pos[i] = self.sim.bodies.pos[self.body_of[i]]
+            quat[i] = self.sim.bodies.quat[self.body_of[i]]
+        self.writer.frame(self.sim.t, pos, quat, self.state)
+
+    @property
+    def n_left(self) -> int:
+        return int(np.sum(self.state != 2))
+
+    # -- the run -----------------------------------------------------------------------------------
+
+    def execute(self, started, deadline, should_stop, progress) -> SimulationResult:
+        self.progress = progress
+        cfg = self.config
+
+        def stop() -> bool:
+            if cfg.run.stop_when_empty and self.emptied_at is not None:
+                return True
+            return bool(should_stop and should_stop())
+
+        status, message = SimulationStatus.OK, ""
+        end = cfg.stages.end
+        self._observe(self.sim)
+        while self.sim.t < end - 1e-9 and not (cfg.run.stop_when_empty and self.emptied_at is not None):
+            self._insert_due()
+            if self.pending and self.sim.t >= cfg.stages.vibration_start - 1e-9:
+                status = SimulationStatus.ERROR
+                message = (
+                    f"{len(self.pending)} of {len(self.items)} items could not be created without overlap "
+                    f"in the inlet region before vibration_start; reduce items.counts, lengthen "
+                    f"stages.insertion_time or enlarge the tray's inlet"
+                )
+                break
+            report = self.sim.run(
+                until=self._next_stop(),
+                chunk_time=cfg.run.chunk_time,
+                deadline=deadline,
+                should_stop=stop,
+                on_chunk=self._observe,
+            )
+            report_status = SimulationStatus(str(getattr(report.status, "value", report.status)))
+            if report_status is SimulationStatus.CANCELLED and cfg.run.stop_when_empty and self.emptied_at:
+                break
+            if report_status is not SimulationStatus.OK:
+                status, message = report_status, report.message or f"the engine stopped: {report_status}"
+                break
+        if status is SimulationStatus.OK and self.escaped:
+            message = (
+                f"{len(self.escaped)} item(s) left the domain outside the outlet and are counted as "
+                "discharged; the time step or the parameters may be too aggressive"
+            )
+        if self.writer is not None:
+            self._snapshot()
+        result = SimulationResult(
+            status=status,
+            message=message,
+            n_items=len(self.items),
+            n_remaining=self.n_left,
+            discharge_times=self.discharge_times,
+            emptied_at=self.emptied_at,
+            sim_time=float(self.sim.t),
+            wall_time_s=time.monotonic() - started,
+            steps=int(self.sim.steps),
+            dt=float(self.sim.dt),
+            cost=float(self.sim.cost),
+            params=self.params,
+            seed=self.seed,
+            version=demcal_version(),
+        )
+        if self.writer is not None:
+            self.writer.summary(result.model_dump(mode="json"))
+        return result
+
+
+def make_items(config: ItemsConfig, rng: np.random.Generator) -> list:
+    """The items of one run, in a fixed order (kind by kind), with their per-item spread."""
+    from dem.scenarios import items
+
+    if config.folder is not None:
+        return items.items_from_folder(
+            config.folder, config.counts, config.masses, rng, config.spread, config.resolution
+        )
+    return items.default_items(rng, config.counts, config.spread, config.resolution)
+
+
+def body_frame_hull(item) -> np.ndarray:
+    """Convex hull vertices of an item's mesh in its body (principal) frame, m."""
+    clump = item.clump
+    hull = item.mesh.convex_hull.vertices
+    return (np.asarray(hull, dtype=float) - np.asarray(clump.com)) @ np.asarray(clump.axes)
