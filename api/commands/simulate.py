@@ -88,8 +88,8 @@ def register(app: typer.Typer) -> None:
         snapshots: Path | None = typer.Option(
             None, "--snapshots", help="Write snapshots for `demcal render`."
         ),
-        vtk: bool = typer.Option(
-            False, "--vtk", help="Also write VTK files for ParaView (needs --snapshots)."
+        vtk: Path | None = typer.Option(
+            None, "--vtk", help="Write VTK files for ParaView (spheres and tray) into this folder."
         ),
         timeout: float | None = typer.Option(None, "--timeout", min=0, help="Give up after this many s."),
     ) -> None:
@@ -110,8 +110,6 @@ def register(app: typer.Typer) -> None:
             _fail(f"{config_path}: {exc}")
         except (OSError, tomllib.TOMLDecodeError) as exc:
             _fail(f"{config_path}: {exc}")
-        if vtk and snapshots is None:
-            _fail("--vtk needs --snapshots DIR to write into")
 
         deadline = time.monotonic() + timeout if timeout is not None else None
         result = _run_with_progress(run_feeder, config, params, seed, deadline, snapshots, vtk, quiet=as_json)
@@ -147,7 +145,6 @@ def _run_with_progress(run_feeder, config, params, seed, deadline, snapshots, vt
         def progress(t: float, left: int) -> None:
             bar.update(task, completed=min(t, end), left=left)
 
-        vtk_dir = snapshots / "vtk" if vtk and snapshots is not None else None
         return run_feeder(
             config,
             params,
@@ -155,7 +152,7 @@ def _run_with_progress(run_feeder, config, params, seed, deadline, snapshots, vt
             deadline=deadline,
             progress=progress,
             snapshot_dir=snapshots,
-            vtk_dir=vtk_dir,
+            vtk_dir=vtk,
         )
 
 

@@ -199,13 +199,15 @@ def run_feeder(
     should_stop: Callable[[], bool] | None = None,
     progress: Progress | None = None,
     snapshot_dir: Path | None = None,
+    vtk_dir: Path | None = None,
 ) -> SimulationResult:
     """Run one feeder experiment with these contact parameters; never raises.
 
     ``params`` holds any of E, nu, e, mu (missing ones come from ``config.params``); ``deadline``
     is a ``time.monotonic()`` value; ``should_stop()`` is polled between chunks; ``progress`` is
     called with (simulated time, items not yet discharged); ``snapshot_dir`` receives the files
-    ``demcal render`` reads (see ``dem/scenarios/render.py``).
+    ``demcal render`` reads (see ``dem/scenarios/render.py``); ``vtk_dir`` receives ParaView files
+    (``spheres_NNNNN.vtk``, ``walls_NNNNN.vtk``) every ``run.snapshot_interval``, from ``dem/vtk.py``.
     """
     started = time.monotonic()
     merged = {**config.params.model_dump(), **params}
@@ -223,7 +225,7 @@ def run_feeder(
             status=SimulationStatus.ERROR, message=f"bad parameters: {exc}", params=_floats(merged), **base
         )
     try:
-        feeder = _FeederRun(config, checked, int(seed), snapshot_dir)
+        feeder = _FeederRun(config, checked, int(seed), snapshot_dir, vtk_dir)
         return feeder.execute(started, deadline, should_stop, progress)
     except Exception as exc:  # the contract: a worker gets a result, never a traceback
         logger.exception("feeder run failed (seed %s, params %s)", seed, checked)
@@ -266,7 +268,14 @@ class _FeederRun:
     PLACEMENT_TRIES = 64
     RETRY_INTERVAL = 0.02
 
-    def __init__(self, config: FeederConfig, params: dict[str, float], seed: int, snapshot_dir: Path | None):
+    def __init__(
+        self,
+        config: FeederConfig,
+        params: dict[str, float],
+        seed: int,
+        snapshot_dir: Path | None,
+        vtk_dir: Path | None = None,
+    ):
         from dem.contact import ContactParams
         from dem.motion import SinusoidalTranslation
         from dem.simulation import Simulation
@@ -320,6 +329,8 @@ class _FeederRun:
                 [item.kind for item in self.items],
                 self.hulls,
             )
+        self.vtk_dir = Path(vtk_dir) if vtk_dir is not None else None
+        self.vtk_frames = 0
         self.next_snapshot = 0.0
 
     # -- insertion ---------------------------------------------------------------------------
@@ -408,13 +419,21 @@ class _FeederRun:
                 sim.remove_body(int(b))
         if self.emptied_at is None and not self.pending and not np.any(self.state == 1):
             self.emptied_at = t
-        if self.writer is not None and t >= self.next_snapshot - 1e-12:
+        if (self.writer is not None or self.vtk_dir is not None) and t >= self.next_snapshot - 1e-12:
             self._snapshot()
             self.next_snapshot = t + self.config.run.snapshot_interval
         if self.progress is not None:
             self.progress(t, self.n_left)
 
     def _snapshot(self) -> None:
+        if self.vtk_dir is not None:
+            from dem import vtk
+
+            vtk.write_spheres(self.sim, self.vtk_dir / f"spheres_{self.vtk_frames:05d}.vtk")
+            vtk.write_walls(self.sim, self.vtk_dir / f"walls_{self.vtk_frames:05d}.vtk")
+            self.vtk_frames += 1
+        if self.writer is None:
+            return
         n = len(self.items)
         pos = np.zeros((n, 3))
         quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
@@ -469,7 +488,7 @@ class _FeederRun:
                 f"{len(self.escaped)} item(s) left the domain outside the outlet and are counted as "
                 "discharged; the time step or the parameters may be too aggressive"
             )
-        if self.writer is not None:
+        if self.writer is not None or self.vtk_dir is not None:
             self._snapshot()
         result = SimulationResult(
             status=status,
