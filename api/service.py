@@ -321,7 +321,7 @@ def build_executor(settings: Settings) -> Any:
         return RqExecutor.from_url(settings.redis_url, settings.queue_name)
     from worker.local import LocalPoolExecutor
 
-    return LocalPoolExecutor(workers=settings.workers)
+    return LocalPoolExecutor(workers=settings.workers, snapshot_root=settings.data_dir / "snapshots")
 
 
 def build_service(settings: Settings, store: SqlStore, **options: Any) -> StudyService:

@@ -200,6 +200,7 @@ class Driver:
             params=dict(params),
             scenario=definition.scenario,
             timeout_s=definition.trial_timeout_s,
+            keep_snapshots=definition.keep_snapshots,
         )
 
     def _ga_batch(self, study: StudyRecord, context: _Study, records: list[TrialRecord]) -> _Batch:

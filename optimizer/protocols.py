@@ -53,6 +53,7 @@ class TrialSpec:
     params: dict[str, float]
     scenario: dict[str, Any]
     timeout_s: float | None = None
+    keep_snapshots: bool = False  # the worker keeps the run's snapshots for a replay
 
 
 @dataclass(frozen=True)

@@ -215,6 +215,11 @@ class StudyDefinition(_Strict):
         None, gt=0, description="Wall-clock limit of one simulation; a slower one ends as 'timeout'."
     )
     seed: int = Field(0, ge=0, le=2**31 - 1, description="Seeds the GA and every simulation.")
+    keep_snapshots: bool = Field(
+        False,
+        description="Workers keep every trial's snapshots (bodies every scenario run.snapshot_interval) "
+        "under <data dir>/snapshots/<trial id>/ so the dashboard can replay the run.",
+    )
 
     @field_validator("scenario")
     @classmethod

@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from dem.result import SimulationResult, SimulationStatus
@@ -27,8 +28,13 @@ def run_trial(
     *,
     should_stop: Callable[[], bool] | None = None,
     progress: Callable[[float, int], None] | None = None,
+    snapshot_root: Path | None = None,
 ) -> dict[str, Any]:
-    """Run one simulation for ``spec``; returns ``SimulationResult.model_dump(mode="json")``."""
+    """Run one simulation for ``spec``; returns ``SimulationResult.model_dump(mode="json")``.
+
+    With ``spec["keep_snapshots"]`` and a ``snapshot_root`` (the worker's data dir), the run's
+    snapshots go to ``snapshot_root/<trial id>/``, where the dashboard's replay reads them.
+    """
     started = time.monotonic()
     params = spec.get("params") or {}
     seed = spec.get("seed", 0)
@@ -38,8 +44,17 @@ def run_trial(
         config = FeederConfig.model_validate(spec["scenario"])
         timeout_s = spec.get("timeout_s")
         deadline = started + float(timeout_s) if timeout_s else None
+        snapshot_dir = None
+        if spec.get("keep_snapshots") and snapshot_root is not None:
+            snapshot_dir = Path(snapshot_root) / str(spec["trial_id"])
         result = run_feeder(
-            config, dict(params), int(seed), deadline=deadline, should_stop=should_stop, progress=progress
+            config,
+            dict(params),
+            int(seed),
+            deadline=deadline,
+            should_stop=should_stop,
+            progress=progress,
+            snapshot_dir=snapshot_dir,
         )
     except Exception as exc:  # the contract: a result, never a traceback
         logger.exception("trial %s failed before or inside the simulation", spec.get("trial_id"))

@@ -32,6 +32,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from multiprocessing import connection, get_context
+from pathlib import Path
 from typing import Any
 
 from dem.result import SimulationResult, SimulationStatus
@@ -46,7 +47,7 @@ DEFAULT_GRACE_S = 30.0
 MAX_WAIT_S = 0.5
 
 
-def _serve(conn, log_level: int) -> None:
+def _serve(conn, log_level: int, snapshot_root: Path | None) -> None:
     """A worker process: run the specs it receives until told to stop (None) or its pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # A spawned process starts with no logging set up; give the engine's records the parent's
@@ -63,7 +64,7 @@ def _serve(conn, log_level: int) -> None:
             return
         if spec is None:
             return
-        conn.send((spec["trial_id"], run_trial(spec)))
+        conn.send((spec["trial_id"], run_trial(spec, snapshot_root=snapshot_root)))
 
 
 @dataclass
@@ -86,8 +87,11 @@ class _Slot:
 class LocalPoolExecutor:
     """An Executor on local processes; see the module docstring for what it guarantees."""
 
-    def __init__(self, workers: int = 0, *, grace_s: float = DEFAULT_GRACE_S):
+    def __init__(
+        self, workers: int = 0, *, grace_s: float = DEFAULT_GRACE_S, snapshot_root: Path | None = None
+    ):
         self.size = workers or os.cpu_count() or 1
+        self.snapshot_root = snapshot_root
         self.grace_s = grace_s
         self._context = get_context("spawn")
         self._slots: list[_Slot] = []
@@ -174,7 +178,7 @@ class LocalPoolExecutor:
         parent, child = self._context.Pipe()
         process = self._context.Process(
             target=_serve,
-            args=(child, logging.getLogger().getEffectiveLevel()),
+            args=(child, logging.getLogger().getEffectiveLevel(), self.snapshot_root),
             daemon=True,
             name="demcal-local-worker",
         )

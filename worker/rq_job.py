@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from pathlib import Path
 from typing import Any
 
 from rq import get_current_job
@@ -111,6 +112,11 @@ def attempt(job: Job) -> int:
     return retries - left + 1
 
 
+# Where this worker process keeps snapshots of trials that ask for them (set by ``run_worker``
+# from the worker's data dir; None keeps none).
+SNAPSHOT_ROOT: Path | None = None
+
+
 def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
     """Run one trial on this worker and deliver its result; returns the SimulationResult JSON."""
     from worker.jobs import run_trial
@@ -134,6 +140,7 @@ def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
         spec,
         should_stop=CancellationCheck(job, spec["trial_id"]),
         progress=ProgressLog(spec["trial_id"], end),
+        snapshot_root=SNAPSHOT_ROOT,
     )
     deliver(job, spec, result)
     logger.info(

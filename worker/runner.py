@@ -30,6 +30,7 @@ import socket
 import threading
 import uuid
 from collections.abc import Sequence
+from pathlib import Path
 
 from redis import Redis
 from rq import Queue, SimpleWorker
@@ -124,11 +125,15 @@ def run_worker(
     name: str | None = None,
     heartbeat_s: int = DEFAULT_HEARTBEAT_S,
     log_level: str = "INFO",
+    snapshot_root: Path | None = None,
 ) -> bool:
     """Work until told to stop (or, with ``burst``, until the queues are empty).
 
     Returns True if at least one job was performed.
     """
+    from worker import rq_job
+
+    rq_job.SNAPSHOT_ROOT = snapshot_root
     connection = connect(redis_url)
     preload()
     worker = build_worker(connection, queue_names, name=name, heartbeat_s=heartbeat_s)

@@ -106,12 +106,13 @@ def _resume(store, study_id: str) -> str:
 def _run(store, study_id: str, workers: int, results: Path) -> None:
     from rich.console import Console
 
+    from api.settings import get_settings
     from optimizer.driver import Driver
     from optimizer.protocols import StudyStatus
     from worker.local import LocalPoolExecutor
 
     console = Console()
-    executor = LocalPoolExecutor(workers)
+    executor = LocalPoolExecutor(workers, snapshot_root=get_settings().data_dir / "snapshots")
     driver = Driver(store, executor)
     try:
         with _LiveProgress(console, executor) as live:

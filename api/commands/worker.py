@@ -42,6 +42,7 @@ def register(app: typer.Typer) -> None:
                 name=name,
                 heartbeat_s=heartbeat,
                 log_level=settings.log_level,
+                snapshot_root=settings.data_dir / "snapshots",
             )
         except WorkerSetupError as exc:
             typer.secho(f"error: {exc}", err=True, fg="red")

@@ -77,3 +77,22 @@ def test_deadline_ends_the_run_as_timeout():
 
     assert result.status is SimulationStatus.TIMEOUT
     assert result.sim_time < 600.0
+
+
+def test_trial_asking_for_snapshots_leaves_a_replayable_directory(tmp_path):
+    from dem.scenarios.render import load_run
+
+    spec = {**tiny_spec(trial="t-snap"), "keep_snapshots": True}
+
+    result = SimulationResult.model_validate(run_trial(spec, snapshot_root=tmp_path))
+
+    assert result.status is SimulationStatus.OK, result.message
+    run = load_run(tmp_path / "t-snap")
+    assert len(run.frames) >= 2
+    assert len(run.names) == result.n_items
+
+
+def test_trial_without_snapshots_writes_nothing(tmp_path):
+    run_trial(tiny_spec(trial="t-none"), snapshot_root=tmp_path)
+
+    assert list(tmp_path.iterdir()) == []
