@@ -239,10 +239,9 @@ def _report(console, store, study_id: str, results: Path) -> None:
             console.print(
                 f"  equivalent (individual {other['individual']}): {params}; f2 {_figure(other['f2'])}"
             )
-    console.print(
-        f"{summary['simulations']} simulations; first match after "
-        f"{summary['simulations_until_first_match']}. Results in {folder}/"
-    )
+    first = summary["simulations_until_first_match"]
+    matched = f"first match after {first}" if first is not None else "no match"
+    console.print(f"{summary['simulations']} simulations; {matched}. Results in {folder}/")
 
 
 def _figure(value: float) -> str:
