@@ -213,6 +213,9 @@ def test_never_raises():
     unstable = run_feeder(_config(run={"dt": 1e-3}), {}, seed=0)
     assert unstable.status is SimulationStatus.UNSTABLE
     assert "unstable" in unstable.message
+    # Far larger still, items are thrown out of the domain before any overlap check trips.
+    thrown = run_feeder(_config(run={"dt": 5e-3}), {}, seed=0)
+    assert thrown.status is SimulationStatus.UNSTABLE, thrown.message
     bad = run_feeder(_config(), {"E": -1.0}, seed=0)
     assert bad.status is SimulationStatus.ERROR and "E" in bad.message
     unknown = run_feeder(_config(), {"G": 1.0}, seed=0)
