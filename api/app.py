@@ -15,12 +15,14 @@ from fastapi import Depends, FastAPI
 from fastapi.responses import JSONResponse
 
 from api import __version__
+from api.auth import KeyCache
 from api.dashboard import dashboard_router
 from api.db import check_schema_current, create_db_engine
 from api.deps import reject_unknown_query
 from api.errors import PayloadTooLargeError, install_error_handlers
 from api.routes import health, metrics, shapes, simulations, studies, trials
 from api.schemas import ErrorDetail
+from api.services.views import StudyViewCache
 from api.settings import Settings
 from api.store import SqlStore
 
@@ -98,6 +100,8 @@ def create_app(settings: Settings, engine: sa.Engine | None = None) -> FastAPI:
     )
     app.state.settings = settings
     app.state.store = SqlStore(engine)
+    app.state.key_cache = KeyCache(settings.api_key_cache_s)
+    app.state.study_views = StudyViewCache()
     install_error_handlers(app)
     strict_query = [Depends(reject_unknown_query)]
     for module in (studies, trials, simulations, shapes, metrics):

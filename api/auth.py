@@ -5,6 +5,11 @@ stored, so a leaked database does not leak usable keys. Lookup is by the hash (a
 the found hash is compared again with ``hmac.compare_digest`` so the check takes the same time
 whatever the input. A key belongs to an owner; an admin key sees every owner's objects.
 
+Every request carries a key, so a verified key is remembered for a moment (``KeyCache``,
+``DEMCAL_API_KEY_CACHE_S``, default 1 s): a revoked key keeps working in a running server for at
+most that long. Only valid keys are cached, by their hash; an unknown token always goes to the
+database.
+
 What it must not do: know about routes or HTTP (``api/deps.py`` turns headers into a Principal).
 """
 
@@ -13,6 +18,8 @@ from __future__ import annotations
 import hashlib
 import hmac
 import secrets
+import threading
+import time
 from dataclasses import dataclass
 
 import sqlalchemy as sa
@@ -90,3 +97,36 @@ def revoke_key(session: Session, key_id: int) -> ApiKeyRow:
     if row.revoked_at is None:
         row.revoked_at = utcnow()
     return row
+
+
+class KeyCache:
+    """Principals of recently verified tokens, each kept ``ttl_s`` seconds (0: no caching).
+
+    Why: checking the key was a database round trip on every request, as much as the request's
+    own work for small reads. The bound on entries keeps memory flat whatever clients send.
+    """
+
+    def __init__(self, ttl_s: float, max_entries: int = 10_000) -> None:
+        self.ttl_s = ttl_s
+        self.max_entries = max_entries
+        self._entries: dict[str, tuple[float, Principal]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, token: str) -> Principal | None:
+        if self.ttl_s <= 0:
+            return None
+        entry = self._entries.get(hash_token(token))
+        if entry is None or entry[0] < time.monotonic():
+            return None
+        return entry[1]
+
+    def put(self, token: str, principal: Principal) -> None:
+        if self.ttl_s <= 0:
+            return
+        with self._lock:
+            if len(self._entries) >= self.max_entries:
+                now = time.monotonic()
+                self._entries = {k: v for k, v in self._entries.items() if v[0] >= now}
+                if len(self._entries) >= self.max_entries:
+                    self._entries.clear()
+            self._entries[hash_token(token)] = (time.monotonic() + self.ttl_s, principal)

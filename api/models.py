@@ -108,6 +108,9 @@ class StudyRow(Base):
     extra: Mapped[dict[str, Any]] = mapped_column(default=dict)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+    # Set by the store on the first move to running and on the move to done, cancelled or failed.
+    started_at: Mapped[datetime | None]
+    finished_at: Mapped[datetime | None]
 
     trials: Mapped[list[TrialRow]] = relationship(
         back_populates="study", cascade="all, delete-orphan", passive_deletes=True, lazy="raise"

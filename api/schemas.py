@@ -89,8 +89,16 @@ class StudyListItem(_Wire):
     generation: int
     trials_done: int
     trials_total: int
+    generations_total: int = Field(0, description="Generations the study's budget allows.")
     created_at: datetime
     updated_at: datetime
+    started_at: datetime | None = Field(None, description="When the study first started running.")
+    finished_at: datetime | None = Field(None, description="When it became done, cancelled or failed.")
+    recommendation: dict[str, Any] | None = Field(
+        None, description="The optimiser's choice so far (params, f1, f2, ...), without its "
+        "equivalent sets (GET /api/v1/studies/{id}/recommendation has them)."
+    )
+    best_f1: float | None = Field(None, description="The lowest f1 of an ok trial so far.")
 
 
 class StudyPage(_Wire):
@@ -112,6 +120,8 @@ class StudyRead(_Wire):
     recommendation: dict[str, Any] | None = None
     created_at: datetime
     updated_at: datetime
+    started_at: datetime | None = Field(None, description="When the study first started running.")
+    finished_at: datetime | None = Field(None, description="When it became done, cancelled or failed.")
 
 
 class Spread(_Wire):

@@ -55,6 +55,10 @@ class Settings(BaseSettings):
     max_mesh_faces: int = Field(2_000_000, ge=4, description="Most faces an uploaded mesh may have.")
     max_population: int = Field(500, ge=2, description="Largest GA population a study may ask for.")
     max_simulations: int = Field(5000, ge=1, description="Largest simulation budget of one study.")
+    api_key_cache_s: float = Field(
+        1.0, ge=0, le=60,
+        description="Seconds a verified API key is remembered; a revoked key works at most this long.",
+    )
 
     @field_validator("database_url")
     @classmethod

@@ -33,7 +33,15 @@ from sqlalchemy.orm import undefer
 
 from api.db import session_factory, unit_of_work
 from api.errors import NotFoundError
-from api.models import ShapeRow, SimulationRow, StudyRow, TrialRow, encode_value, utcnow
+from api.models import (
+    ShapeRow,
+    SimulationRow,
+    StudyRow,
+    TrialRow,
+    UTCDateTime,
+    encode_value,
+    utcnow,
+)
 from dem.result import SimulationResult
 from optimizer.protocols import (
     StudyRecord,
@@ -67,6 +75,15 @@ class TrialFilter:
     state: TrialState | None = None
     pareto: bool | None = None
     updated_since: datetime | None = None
+
+
+# The columns of a trial as lists and plots show it (``api.schemas.TrialRead``).
+TRIAL_READ_COLUMNS = (
+    TrialRow.id, TrialRow.generation, TrialRow.individual, TrialRow.replicate, TrialRow.seed,
+    TrialRow.params, TrialRow.state, TrialRow.status, TrialRow.n_remaining, TrialRow.wall_time_s,
+    TrialRow.cost, TrialRow.pareto, TrialRow.worker, TrialRow.attempts, TrialRow.message,
+    TrialRow.updated_at, TrialRow.f1_value, TrialRow.f1_kind, TrialRow.f2_value, TrialRow.f2_kind,
+)
 
 
 def _owner_clause(column, visible_to: str | None):
@@ -124,6 +141,18 @@ class SqlStore:
         with self.session() as s:
             return self._study_row(s, study_id, visible_to)
 
+    def study_version(self, study_id: str, visible_to: str | None = ALL_OWNERS) -> sa.Row:
+        """(id, updated_at, generation) of a visible study, without loading its JSON columns:
+        the check that a hot read may go ahead, and the version of cached views."""
+        with self.session() as s:
+            row = s.execute(
+                sa.select(StudyRow.id, StudyRow.owner, StudyRow.updated_at, StudyRow.generation)
+                .where(StudyRow.id == study_id)
+            ).one_or_none()
+        if row is None or not (visible_to is ALL_OWNERS or row.owner == visible_to):
+            raise NotFoundError(f"no study {study_id!r}; list your studies with GET /api/v1/studies")
+        return row
+
     def load_study(self, study_id: str) -> StudyRecord:
         with self.session() as s:
             row = s.scalars(
@@ -176,6 +205,7 @@ class SqlStore:
             row = self._study_row(s, study_id)
             row.status = status.value
             row.message = message
+            row.started_at, row.finished_at = _study_times(row.started_at, row.finished_at, status)
 
     def transition(
         self, study_id: str, allowed_from: Iterable[StudyStatus], to: StudyStatus, message: str = ""
@@ -186,7 +216,7 @@ class SqlStore:
             done = s.execute(
                 sa.update(StudyRow)
                 .where(StudyRow.id == study_id, StudyRow.status.in_(allowed))
-                .values(status=to.value, message=message, updated_at=utcnow())
+                .values(status=to.value, message=message, updated_at=utcnow(), **_time_columns(to))
             ).rowcount
             if done and to is StudyStatus.CANCELLED:
                 s.execute(
@@ -380,7 +410,8 @@ class SqlStore:
                 )
             return row
 
-    def list_trials(self, study_id: str, where: TrialFilter, limit: int, offset: int) -> Page:
+    @staticmethod
+    def _trial_clauses(study_id: str, where: TrialFilter) -> list:
         clauses = [TrialRow.study_id == study_id]
         if where.generation is not None:
             clauses.append(TrialRow.generation == where.generation)
@@ -392,6 +423,10 @@ class SqlStore:
             # ">=": rows updated in the same clock tick as the previous poll are sent again rather
             # than missed; clients upsert by id.
             clauses.append(TrialRow.updated_at >= where.updated_since)
+        return clauses
+
+    def list_trials(self, study_id: str, where: TrialFilter, limit: int, offset: int) -> Page:
+        clauses = self._trial_clauses(study_id, where)
         with self.session() as s:
             total = s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses))
             rows = s.scalars(
@@ -400,6 +435,47 @@ class SqlStore:
                 .limit(limit).offset(offset)
             ).all()
             return Page(list(rows), int(total or 0))
+
+    def trial_page_rows(self, study_id: str, where: TrialFilter, limit: int, offset: int) -> Page:
+        """A page of the trial list as plain rows of the columns ``TrialRead`` needs: no ORM
+        objects are built (that was most of a page's cost), and no JSON blob but ``params``."""
+        clauses = self._trial_clauses(study_id, where)
+        with self.session() as s:
+            total = s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses))
+            rows = s.execute(
+                sa.select(*TRIAL_READ_COLUMNS).where(*clauses)
+                .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate)
+                .limit(limit).offset(offset)
+            ).all()
+            return Page(list(rows), int(total or 0))
+
+    def pareto_columns(self, study_id: str) -> list[sa.Row]:
+        """The Pareto members' columns (as ``trial_columns``), without building ORM objects."""
+        with self.session() as s:
+            return list(
+                s.execute(
+                    sa.select(*TRIAL_READ_COLUMNS)
+                    .where(TrialRow.study_id == study_id, TrialRow.pareto.is_(True))
+                )
+            )
+
+    def best_f1s(self, study_ids: Sequence[str]) -> dict[str, float]:
+        """The lowest finite f1 of an ok trial per study, for a page of studies in one query."""
+        if not study_ids:
+            return {}
+        with self.session() as s:
+            return {
+                study_id: float(f1)
+                for study_id, f1 in s.execute(
+                    sa.select(TrialRow.study_id, sa.func.min(TrialRow.f1_value))
+                    .where(
+                        TrialRow.study_id.in_(list(study_ids)), TrialRow.status == "ok",
+                        TrialRow.f1_kind == "finite",
+                    )
+                    .group_by(TrialRow.study_id)
+                )
+                if f1 is not None
+            }
 
     def trial_columns(self, study_id: str) -> list[sa.Row]:
         """Every trial's plot and summary columns, without the JSON blobs (for summaries)."""
@@ -618,6 +694,35 @@ class SqlStore:
     def delete_shape(self, shape_id: str) -> None:
         with self.session() as s:
             s.execute(sa.delete(ShapeRow).where(ShapeRow.id == shape_id))
+
+
+FINISHED_STUDIES = (StudyStatus.DONE, StudyStatus.CANCELLED, StudyStatus.FAILED)
+
+
+def _study_times(
+    started_at: datetime | None, finished_at: datetime | None, status: StudyStatus
+) -> tuple[datetime | None, datetime | None]:
+    """(started_at, finished_at) after a move to ``status``: the first start is kept; a finish
+    time is set on the move to a finished status (and cleared if a study ever runs again)."""
+    now = utcnow()
+    if status is StudyStatus.RUNNING:
+        return started_at or now, None
+    if status in FINISHED_STUDIES:
+        return started_at, finished_at or now
+    return started_at, finished_at
+
+
+def _now_literal():
+    return sa.literal(utcnow(), UTCDateTime())
+
+
+def _time_columns(status: StudyStatus) -> dict[str, Any]:
+    """The same rule as ``_study_times`` as UPDATE values, for conditional (atomic) transitions."""
+    if status is StudyStatus.RUNNING:
+        return {"started_at": sa.func.coalesce(StudyRow.started_at, _now_literal()), "finished_at": None}
+    if status in FINISHED_STUDIES:
+        return {"finished_at": sa.func.coalesce(StudyRow.finished_at, _now_literal())}
+    return {}
 
 
 def _chunks(items: list, size: int) -> Iterable[list]:

@@ -8,7 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import StreamingResponse
 
-from api.deps import ApiKeyDep, SettingsDep, StoreDep
+from api.deps import ApiKeyDep, SettingsDep, StoreDep, StudyViewsDep
 from api.schemas import GenerationSummary, ParetoFront, RecommendationRead, StudyPage, StudyRead
 from api.services import studies, trials
 from optimizer.protocols import StudyStatus
@@ -64,9 +64,10 @@ def delete_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
 
 
 @router.get("/{study_id}/pareto", response_model=ParetoFront)
-def pareto_front(study_id: str, principal: ApiKeyDep, store: StoreDep):
+def pareto_front(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
     """The current Pareto front (f1 = |N_t - target|, f2 = computation time), best f1 first."""
-    return trials.pareto_front(store, study_id, principal)
+    body = trials.pareto_front_json(store, views, study_id, principal)
+    return Response(body, media_type="application/json")
 
 
 @router.get("/{study_id}/generations", response_model=list[GenerationSummary])

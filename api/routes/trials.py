@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Response
 
 from api.deps import ApiKeyDep, StoreDep
 from api.schemas import TrialDetail, TrialPage
@@ -33,7 +33,10 @@ def list_trials(
     ] = None,
 ):
     where = TrialFilter(generation=generation, state=state, pareto=pareto, updated_since=updated_since)
-    return trials.list_trials(store, study_id, principal, where, limit, offset)
+    return Response(
+        trials.list_trials_json(store, study_id, principal, where, limit, offset),
+        media_type="application/json",
+    )
 
 
 @router.get("/{trial_id}", response_model=TrialDetail)

@@ -62,22 +62,38 @@ def get_study(store: SqlStore, study_id: str, principal: Principal) -> StudyRead
         ),
         best=trial_read(best) if best is not None else None,
         recommendation=row.recommendation, created_at=row.created_at, updated_at=row.updated_at,
+        started_at=row.started_at, finished_at=row.finished_at,
     )
+
+
+def _compact(recommendation: dict | None) -> dict | None:
+    """The recommendation without its list of equivalent sets, which may be long."""
+    if recommendation is None:
+        return None
+    return {key: value for key, value in recommendation.items() if key != "equivalent"}
 
 
 def list_studies(
     store: SqlStore, principal: Principal, status: StudyStatus | None, limit: int, offset: int
 ) -> StudyPage:
     page = store.list_studies(principal.visible_to, status, limit, offset)
-    done = store.done_counts([row.id for row in page.items])
-    items = [
-        StudyListItem(
-            id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status), message=row.message,
-            generation=row.generation, trials_done=done.get(row.id, 0),
-            trials_total=_budget(row.definition)[0], created_at=row.created_at, updated_at=row.updated_at,
+    ids = [row.id for row in page.items]
+    # One grouped query each for the whole page, not one per study.
+    done = store.done_counts(ids)
+    best_f1 = store.best_f1s(ids)
+    items = []
+    for row in page.items:
+        trials_total, generations_total = _budget(row.definition)
+        items.append(
+            StudyListItem(
+                id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status),
+                message=row.message, generation=row.generation, trials_done=done.get(row.id, 0),
+                trials_total=trials_total, generations_total=generations_total,
+                created_at=row.created_at, updated_at=row.updated_at, started_at=row.started_at,
+                finished_at=row.finished_at, recommendation=_compact(row.recommendation),
+                best_f1=best_f1.get(row.id),
+            )
         )
-        for row in page.items
-    ]
     return StudyPage(items=items, total=page.total, limit=limit, offset=offset)
 
 

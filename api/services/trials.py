@@ -2,6 +2,10 @@
 summary (median and spread of N_t and T per generation: the paper's Fig. 5), the recommendation
 with its equivalent sets, and CSV/JSON exports.
 
+The two reads every dashboard polls, the trial page and the Pareto front, return JSON bytes:
+they are built from plain column rows and serialised once by pydantic, and the front is cached
+per study version (``api/services/views.py``). The routes still declare their response models.
+
 It reads only; the optimiser (through the store) is the one that writes objectives and Pareto
 flags. Every function first checks that the caller may see the study (404 otherwise).
 """
@@ -16,7 +20,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from api.auth import Principal
-from api.models import TrialRow, decode_value
+from api.models import TrialRow, decode_value, utcnow
 from api.schemas import (
     GenerationSummary,
     ParetoFront,
@@ -28,6 +32,7 @@ from api.schemas import (
     TrialRead,
     finite_or_none,
 )
+from api.services.views import StudyViewCache
 from api.store import SqlStore, TrialFilter
 from optimizer.protocols import PARAMETER_NAMES, StudyStatus
 from optimizer.study import StudyDefinition
@@ -63,19 +68,26 @@ def _pareto_point(row) -> ParetoPoint:
     )
 
 
-def list_trials(
-    store: SqlStore, study_id: str, principal: Principal, where: TrialFilter, limit: int, offset: int
-) -> TrialPage:
-    from api.models import utcnow
+def _trial_item(row) -> dict:
+    """A ``TrialRead`` as a dict, from a row of ``TRIAL_READ_COLUMNS``."""
+    item = row._asdict()
+    item["f1"] = finite_or_none(decode_value(item.pop("f1_value"), item.pop("f1_kind")))
+    item["f2"] = finite_or_none(decode_value(item.pop("f2_value"), item.pop("f2_kind")))
+    return item
 
-    store.get_study(study_id, principal.visible_to)
+
+def list_trials_json(
+    store: SqlStore, study_id: str, principal: Principal, where: TrialFilter, limit: int, offset: int
+) -> bytes:
+    """A ``TrialPage`` as JSON bytes, from plain rows (no ORM objects, one serialisation pass)."""
+    store.study_version(study_id, principal.visible_to)
     # Taken before the query, so a row updated while we read is sent again next poll, not missed.
     server_time = utcnow()
-    page = store.list_trials(study_id, where, limit, offset)
-    return TrialPage(
-        items=[trial_read(row) for row in page.items], total=page.total, limit=limit, offset=offset,
-        server_time=server_time,
-    )
+    page = store.trial_page_rows(study_id, where, limit, offset)
+    return TrialPage.model_validate(
+        {"items": [_trial_item(row) for row in page.items], "total": page.total, "limit": limit,
+         "offset": offset, "server_time": server_time}
+    ).model_dump_json().encode()
 
 
 def get_trial(store: SqlStore, study_id: str, trial_id: str, principal: Principal) -> TrialDetail:
@@ -88,11 +100,21 @@ def get_trial(store: SqlStore, study_id: str, trial_id: str, principal: Principa
     )
 
 
-def pareto_front(store: SqlStore, study_id: str, principal: Principal) -> ParetoFront:
-    study = store.get_study(study_id, principal.visible_to)
-    rows = store.pareto_rows(study_id)
-    points = sorted((_pareto_point(row) for row in rows), key=lambda p: (_sort_key(p.f1), _sort_key(p.f2)))
-    return ParetoFront(study_id=study_id, generation=study.generation, points=points)
+def pareto_front_json(
+    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal
+) -> bytes:
+    """The ``ParetoFront`` as JSON bytes, built once per version of the study (see ``views``)."""
+    study = store.study_version(study_id, principal.visible_to)
+
+    def build() -> bytes:
+        rows = store.pareto_columns(study_id)
+        points = sorted(
+            (_pareto_point(row) for row in rows), key=lambda p: (_sort_key(p.f1), _sort_key(p.f2))
+        )
+        front = ParetoFront(study_id=study_id, generation=study.generation, points=points)
+        return front.model_dump_json().encode()
+
+    return views.get_or_build("pareto", study_id, (study.updated_at, study.generation), build)
 
 
 def _sort_key(value: float | None) -> float:

@@ -36,6 +36,9 @@ def test_studies_page_lists_the_study_with_progress_and_status(page, dashboard):
     assert "feeder-calibration" in cells[0]
     assert cells[1] == "done"
     assert cells[2].startswith(f"{n} / {n}")
+    assert "E = " in cells[4] or "best f1 so far" in cells[4]
+    started, finished = cells[6], cells[7]
+    assert started != "–" and finished != "–"
     assert page.errors == []
     save_screenshot(page, "dashboard-studies")
 

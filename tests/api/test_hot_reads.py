@@ -1,0 +1,137 @@
+"""The reads every dashboard polls, made cheap: the study list's times and recommendation (in one
+page query, no per-study round trips), the cached Pareto front that still follows every
+generation, trial pages built from plain rows with the same schema, and the short-lived cache
+of verified API keys that still lets a revocation through within its TTL."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from fastapi.testclient import TestClient
+
+from api.app import create_app
+from api.auth import revoke_key
+from api.schemas import ParetoFront, TrialPage
+from optimizer.driver import Driver
+from optimizer.memory import SyntheticExecutor
+from optimizer.protocols import StudyStatus
+from optimizer.study import StudyDefinition
+from tests.api.conftest import study_definition
+
+
+def _run(store, owner: str = "alice", **ga) -> str:
+    definition = StudyDefinition.model_validate(
+        study_definition(ga=ga or {"population": 6, "offspring": 3, "generations": 2}, seed=5)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner=owner)
+    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    return study_id
+
+
+def test_study_list_items_carry_times_and_the_recommendation_so_far(client, keys, store):
+    finished = _run(store)
+    created = client.post("/api/v1/studies", json=study_definition(), headers=keys.auth()).json()["id"]
+
+    items = {item["id"]: item for item in client.get("/api/v1/studies", headers=keys.auth()).json()["items"]}
+    detail = client.get(f"/api/v1/studies/{finished}", headers=keys.auth()).json()
+
+    done, fresh = items[finished], items[created]
+    assert done["status"] == "done"
+    assert done["started_at"] is not None and done["finished_at"] is not None
+    assert done["started_at"] <= done["finished_at"]
+    assert done["best_f1"] == pytest.approx(detail["best"]["f1"])
+    assert done["recommendation"] is None or (
+        set(done["recommendation"]["params"]) == {"E", "nu", "e", "mu"}
+        and "equivalent" not in done["recommendation"]
+    )
+    assert detail["started_at"] == done["started_at"] and detail["finished_at"] == done["finished_at"]
+    assert fresh["started_at"] is None and fresh["finished_at"] is None and fresh["best_f1"] is None
+
+
+def test_study_times_follow_the_status_transitions(store):
+    study_id = store.create_study(study_definition(), owner="alice")
+
+    store.set_status(study_id, StudyStatus.RUNNING)
+    started = store.get_study(study_id).started_at
+    store.transition(study_id, [StudyStatus.RUNNING], StudyStatus.PAUSED)
+    store.transition(study_id, [StudyStatus.PAUSED], StudyStatus.RUNNING)
+    resumed = store.get_study(study_id)
+    store.transition(study_id, [StudyStatus.RUNNING], StudyStatus.CANCELLED)
+    cancelled = store.get_study(study_id)
+
+    assert started is not None
+    assert resumed.started_at == started and resumed.finished_at is None
+    assert cancelled.started_at == started
+    assert cancelled.finished_at is not None and cancelled.finished_at >= started
+
+
+def test_study_list_costs_the_same_number_of_queries_for_one_study_or_many(client, keys, store, engine):
+    import sqlalchemy as sa
+
+    _run(store)
+    client.get("/api/v1/studies", headers=keys.auth())  # the key is verified once, then cached
+    statements: list[str] = []
+
+    def count(*args):
+        statements.append(args[2])
+
+    sa.event.listen(engine, "before_cursor_execute", count)
+    try:
+        client.get("/api/v1/studies", headers=keys.auth())
+        one = len(statements)
+        for _ in range(3):
+            _run(store)
+        statements.clear()
+        page = client.get("/api/v1/studies", headers=keys.auth()).json()
+        many = len(statements)
+    finally:
+        sa.event.remove(engine, "before_cursor_execute", count)
+
+    assert page["total"] == 4
+    assert many == one
+
+
+def test_cached_pareto_front_follows_each_new_generation(client, keys, store):
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 6, "offspring": 3, "generations": 3}, seed=5)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="alice")
+    driver = Driver(store, SyntheticExecutor())
+    url = f"/api/v1/studies/{study_id}/pareto"
+    fronts = []
+
+    while driver.step(study_id, timeout=0).active:
+        fronts.append(client.get(url, headers=keys.auth()).json())
+    fronts.append(client.get(url, headers=keys.auth()).json())
+
+    flagged = {row.id for row in store.pareto_rows(study_id)}
+    assert {point["id"] for point in fronts[-1]["points"]} == flagged
+    assert fronts[-1]["generation"] == store.get_study(study_id).generation
+    assert len({front["generation"] for front in fronts}) > 1
+    ParetoFront.model_validate(fronts[-1])
+
+
+def test_trial_page_from_plain_rows_keeps_the_schema(client, keys, store):
+    study_id = _run(store)
+
+    response = client.get(f"/api/v1/studies/{study_id}/trials", params={"limit": 3}, headers=keys.auth())
+
+    assert response.headers["content-type"] == "application/json"
+    page = TrialPage.model_validate(response.json())
+    assert page.total == 12 and len(page.items) == 3
+    assert all(item.f1 is not None for item in page.items)
+
+
+def test_revoked_key_stops_working_within_the_cache_ttl(settings, engine, keys, store):
+    short_ttl = settings.model_copy(update={"api_key_cache_s": 0.3})
+    with TestClient(create_app(short_ttl, engine=engine)) as client:
+        assert client.get("/api/v1/studies", headers=keys.auth()).status_code == 200
+        with store.session() as session:
+            revoke_key(session, keys.alice_id)
+
+        time.sleep(0.4)
+        response = client.get("/api/v1/studies", headers=keys.auth())
+
+    assert response.status_code == 401
+    assert "revoked" in response.json()["detail"]
