@@ -63,3 +63,11 @@ def main() -> None:
     except SettingsError as exc:
         typer.secho(f"error: {exc}", err=True, fg="red")
         sys.exit(2)
+    except Exception as exc:
+        # Imported here: api.db pulls in SQLAlchemy, which `demcal --help` should not pay for.
+        from api.db import SchemaOutOfDateError
+
+        if not isinstance(exc, SchemaOutOfDateError):
+            raise
+        typer.secho(f"error: {exc}", err=True, fg="red")
+        sys.exit(2)

@@ -1,5 +1,6 @@
 """Settings fail early with the variable's name; the CLI explains itself."""
 
+import os
 import subprocess
 import sys
 
@@ -58,3 +59,25 @@ def test_console_script_reports_bad_setting_and_exits_2(monkeypatch):
     )
     assert proc.returncode == 2
     assert "DEMCAL_REDIS_URL" in proc.stderr
+
+
+def test_out_of_date_database_is_a_one_line_error_not_a_traceback(tmp_path):
+    import sqlalchemy as sa
+
+    database = tmp_path / "old.db"
+    engine = sa.create_engine(f"sqlite:///{database}")
+    with engine.begin() as conn:
+        conn.execute(sa.text("CREATE TABLE alembic_version (version_num VARCHAR(32) PRIMARY KEY)"))
+        conn.execute(sa.text("INSERT INTO alembic_version VALUES ('0001')"))
+    engine.dispose()
+
+    proc = subprocess.run(
+        [sys.executable, "-c", "from api.cli import main; main()", "apikey", "list"],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "DEMCAL_DATABASE_URL": f"sqlite:///{database}"},
+    )
+
+    assert proc.returncode == 2
+    assert "demcal db upgrade" in proc.stderr
+    assert "Traceback" not in proc.stderr
