@@ -323,6 +323,13 @@ class SqlStore:
             ]
             if new_rows:
                 s.execute(sa.insert(TrialRow), new_rows)
+                # The study's updated_at versions its cached views (``api/services/views.py``);
+                # new trials change the unfiltered trial count.
+                s.execute(
+                    sa.update(StudyRow)
+                    .where(StudyRow.id.in_({row["study_id"] for row in new_rows}))
+                    .values(updated_at=now)
+                )
 
     def trials(self, study_id: str, states: Sequence[TrialState] | None = None) -> list[TrialRecord]:
         query = (
@@ -436,12 +443,21 @@ class SqlStore:
             ).all()
             return Page(list(rows), int(total or 0))
 
-    def trial_page_rows(self, study_id: str, where: TrialFilter, limit: int, offset: int) -> Page:
-        """A page of the trial list as plain rows of the columns ``TrialRead`` needs: no ORM
-        objects are built (that was most of a page's cost), and no JSON blob but ``params``."""
+    def trial_count(self, study_id: str, where: TrialFilter) -> int:
         clauses = self._trial_clauses(study_id, where)
         with self.session() as s:
-            total = s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses))
+            return int(s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses)) or 0)
+
+    def trial_page_rows(
+        self, study_id: str, where: TrialFilter, limit: int, offset: int, total: int | None = None
+    ) -> Page:
+        """A page of the trial list as plain rows of the columns ``TrialRead`` needs: no ORM
+        objects are built (that was most of a page's cost), and no JSON blob but ``params``.
+        ``total``, when the caller knows it, saves the count query."""
+        clauses = self._trial_clauses(study_id, where)
+        with self.session() as s:
+            if total is None:
+                total = s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses))
             rows = s.execute(
                 sa.select(*TRIAL_READ_COLUMNS).where(*clauses)
                 .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate)

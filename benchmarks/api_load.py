@@ -126,6 +126,10 @@ async def load(base: str, study_id: str, token: str, clients: int, seconds: floa
     async def client_loop(index: int, client: httpx.AsyncClient, stop: float) -> None:
         nonlocal errors
         rng = random.Random(index)
+        if think:
+            # Dashboards do not poll in lock step: spread the clients' first requests over one
+            # think time instead of sending 50 at the same instant at the start of each phase.
+            await asyncio.sleep(think * rng.uniform(0, 1))
         while time.monotonic() < stop:
             if rng.random() < 0.5:
                 kind, path, params = "pareto", f"/api/v1/studies/{study_id}/pareto", None

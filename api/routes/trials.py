@@ -7,7 +7,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Response
 
-from api.deps import ApiKeyDep, StoreDep
+from api.deps import ApiKeyDep, StoreDep, StudyViewsDep
 from api.schemas import TrialDetail, TrialPage
 from api.services import trials
 from api.store import TrialFilter
@@ -21,6 +21,7 @@ def list_trials(
     study_id: str,
     principal: ApiKeyDep,
     store: StoreDep,
+    views: StudyViewsDep,
     limit: Annotated[int, Query(ge=1, le=5000, description="Page size.")] = 100,
     offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
     generation: Annotated[int | None, Query(ge=0, le=1_000_000)] = None,
@@ -34,7 +35,7 @@ def list_trials(
 ):
     where = TrialFilter(generation=generation, state=state, pareto=pareto, updated_since=updated_since)
     return Response(
-        trials.list_trials_json(store, study_id, principal, where, limit, offset),
+        trials.list_trials_json(store, views, study_id, principal, where, limit, offset),
         media_type="application/json",
     )
 

@@ -71,19 +71,36 @@ def _pareto_point(row) -> ParetoPoint:
 def _trial_item(row) -> dict:
     """A ``TrialRead`` as a dict, from a row of ``TRIAL_READ_COLUMNS``."""
     item = row._asdict()
-    item["f1"] = finite_or_none(decode_value(item.pop("f1_value"), item.pop("f1_kind")))
-    item["f2"] = finite_or_none(decode_value(item.pop("f2_value"), item.pop("f2_kind")))
+    item["f1"] = _finite_objective(item.pop("f1_value"), item.pop("f1_kind"))
+    item["f2"] = _finite_objective(item.pop("f2_value"), item.pop("f2_kind"))
     return item
 
 
+def _finite_objective(value: float | None, kind: str | None) -> float | None:
+    if kind == "finite":  # the common case, without decode_value's enum lookups
+        return value
+    return finite_or_none(decode_value(value, kind))
+
+
 def list_trials_json(
-    store: SqlStore, study_id: str, principal: Principal, where: TrialFilter, limit: int, offset: int
+    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, where: TrialFilter,
+    limit: int, offset: int,
 ) -> bytes:
-    """A ``TrialPage`` as JSON bytes, from plain rows (no ORM objects, one serialisation pass)."""
-    store.study_version(study_id, principal.visible_to)
+    """A ``TrialPage`` as JSON bytes, from plain rows (no ORM objects, one serialisation pass).
+
+    The unfiltered total only changes when trials are added, which updates the study row, so it
+    is cached per study version like the Pareto front; filtered totals are counted each time.
+    """
+    study = store.study_version(study_id, principal.visible_to)
     # Taken before the query, so a row updated while we read is sent again next poll, not missed.
     server_time = utcnow()
-    page = store.trial_page_rows(study_id, where, limit, offset)
+    total = None
+    if where == TrialFilter():
+        total = int(views.get_or_build(
+            "trial-count", study_id, (study.updated_at, study.generation),
+            lambda: str(store.trial_count(study_id, where)).encode(),
+        ))
+    page = store.trial_page_rows(study_id, where, limit, offset, total=total)
     return TrialPage.model_validate(
         {"items": [_trial_item(row) for row in page.items], "total": page.total, "limit": limit,
          "offset": offset, "server_time": server_time}

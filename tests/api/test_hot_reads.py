@@ -135,3 +135,19 @@ def test_revoked_key_stops_working_within_the_cache_ttl(settings, engine, keys, 
 
     assert response.status_code == 401
     assert "revoked" in response.json()["detail"]
+
+
+def test_cached_trial_total_follows_new_trials(client, keys, store):
+    from dataclasses import replace
+
+    from optimizer.protocols import trial_id
+
+    study_id = _run(store)
+    url = f"/api/v1/studies/{study_id}/trials"
+    before = client.get(url, headers=keys.auth()).json()["total"]
+    template = store.trials(study_id)[0].spec
+
+    store.add_trials([replace(template, trial_id=trial_id(study_id, 99, 0), individual=99, generation=3)])
+    after = client.get(url, headers=keys.auth()).json()["total"]
+
+    assert after == before + 1
