@@ -167,7 +167,7 @@ def draw_frame(run: Run, frame: Frame, axes_top, axes_side) -> None:
     tri = run.tray_vertices[run.tray_faces]
     for ax, (i, j) in ((axes_top, (0, 1)), (axes_side, (0, 2))):
         for face in tri:
-            ax.add_patch(Polygon(face[:, [i, j]], closed=True, fc="#dddddd", ec="#999999", lw=0.3, zorder=0))
+            ax.add_patch(Polygon(face[:, [i, j]], closed=True, fc="#dddddd", ec="none", zorder=0))
     rotations = quaternion_matrix(frame.quat)
     # Draw from the bottom up so that the top view shows what a camera above would see.
     order = np.argsort(frame.pos[:, 2])
