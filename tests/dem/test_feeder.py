@@ -220,3 +220,20 @@ def test_never_raises():
     assert bad.status is SimulationStatus.ERROR and "E" in bad.message
     unknown = run_feeder(_config(), {"G": 1.0}, seed=0)
     assert unknown.status is SimulationStatus.ERROR and "G" in unknown.message
+
+
+def test_config_round_trips_through_json_as_it_travels_to_workers(tmp_path):
+    import json
+
+    mesh = tmp_path / "tray.stl"
+    config = FeederConfig.model_validate(
+        {
+            "tray": {"mesh_file": str(mesh), "mesh_scale": 0.001},
+            "vibration": {"amplitude_kind": "peak_to_peak"},
+        }
+    )
+
+    travelled = FeederConfig.model_validate(json.loads(json.dumps(config.model_dump(mode="json"))))
+
+    assert travelled == config
+    assert travelled.vibration.peak_amplitude == pytest.approx(config.vibration.amplitude / 2)
