@@ -432,17 +432,6 @@ class SqlStore:
             clauses.append(TrialRow.updated_at >= where.updated_since)
         return clauses
 
-    def list_trials(self, study_id: str, where: TrialFilter, limit: int, offset: int) -> Page:
-        clauses = self._trial_clauses(study_id, where)
-        with self.session() as s:
-            total = s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses))
-            rows = s.scalars(
-                sa.select(TrialRow).where(*clauses)
-                .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate)
-                .limit(limit).offset(offset)
-            ).all()
-            return Page(list(rows), int(total or 0))
-
     def trial_count(self, study_id: str, where: TrialFilter) -> int:
         clauses = self._trial_clauses(study_id, where)
         with self.session() as s:
