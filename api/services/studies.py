@@ -39,6 +39,15 @@ def create_study(
     return get_study(store, study_id, principal)
 
 
+def latest_generation(batches_recorded: int) -> int:
+    """The index of the latest recorded generation (0 = the initial population).
+
+    The store counts recorded batches (the driver saves batch index + 1); clients compare this
+    with ``generations_total``, so a finished study of n generations reads "n of n".
+    """
+    return max(batches_recorded - 1, 0)
+
+
 def _budget(definition: dict) -> tuple[int, int]:
     """(simulations, generations) the definition allows; (0, 0) if it cannot be read."""
     try:
@@ -58,7 +67,8 @@ def get_study(store: SqlStore, study_id: str, principal: Principal) -> StudyRead
         definition=row.definition,
         progress=Progress(
             trials_total=trials_total, trials_done=counts.get(TrialState.DONE.value, 0),
-            trials_by_state=counts, generation=row.generation, generations_total=generations_total,
+            trials_by_state=counts, generation=latest_generation(row.generation),
+            generations_total=generations_total,
         ),
         best=trial_read(best) if best is not None else None,
         recommendation=row.recommendation, created_at=row.created_at, updated_at=row.updated_at,
@@ -87,7 +97,8 @@ def list_studies(
         items.append(
             StudyListItem(
                 id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status),
-                message=row.message, generation=row.generation, trials_done=done.get(row.id, 0),
+                message=row.message, generation=latest_generation(row.generation),
+                trials_done=done.get(row.id, 0),
                 trials_total=trials_total, generations_total=generations_total,
                 created_at=row.created_at, updated_at=row.updated_at, started_at=row.started_at,
                 finished_at=row.finished_at, recommendation=_compact(row.recommendation),

@@ -124,6 +124,10 @@ def test_study_progress_counts_done_trials_and_best(client, keys, finished):
     assert body["status"] == "done"
     assert body["progress"]["trials_done"] == body["progress"]["trials_total"] == 12
     assert body["best"]["f1"] == min(item["f1"] for item in trials)
+    # Initial population + 2 generations, all recorded: generation 2 of 2, in the list too.
+    assert (body["progress"]["generation"], body["progress"]["generations_total"]) == (2, 2)
+    listed = client.get("/api/v1/studies", headers=keys.auth()).json()["items"]
+    assert [(item["generation"], item["generations_total"]) for item in listed] == [(2, 2)]
 
 
 def test_metrics_count_studies_trials_and_seconds(client, keys, store, finished):

@@ -173,7 +173,7 @@ def seed_study(
                 "objective_time": "wall",
             }
         store.save_generation(
-            study_id, generation, b"synthetic", front, recommendation,
+            study_id, generation + 1, b"synthetic", front, recommendation,
             objectives={tid: objectives[tid] for tid in (s.trial_id for s in specs)},
         )
         seeded.pareto_ids = front
