@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -76,3 +76,13 @@ def _floats(params: dict[str, Any]) -> dict[str, float]:
         except (TypeError, ValueError):
             continue  # an unusable value is already named in the error message
     return clean
+
+
+def longest_first(specs: Sequence[Any]) -> list[Any]:
+    """Trial specs in the order executors should start them: the stiffest E first.
+
+    The automatic step scales as 1/sqrt(E), so a stiffer trial takes more steps. Starting the
+    longest trials first (LPT scheduling) keeps a generation from ending with one long trial
+    running alone while the other workers idle. With a forced step the order is neutral.
+    """
+    return sorted(specs, key=lambda spec: -float(spec.params.get("E", 0.0)))

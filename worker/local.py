@@ -37,6 +37,7 @@ from typing import Any
 
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import TrialOutcome, TrialSpec
+from worker.jobs import longest_first
 
 logger = logging.getLogger(__name__)
 
@@ -101,7 +102,7 @@ class LocalPoolExecutor:
 
     def submit(self, specs: Sequence[TrialSpec]) -> None:
         known = self.in_flight()
-        for spec in specs:
+        for spec in longest_first(specs):
             if spec.trial_id not in known:
                 self._waiting.append(spec)
                 known.add(spec.trial_id)

@@ -49,6 +49,7 @@ from rq.serializers import JSONSerializer
 
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import TrialOutcome, TrialSpec
+from worker.jobs import longest_first
 from worker.rq_job import cancel_key, results_key
 
 logger = logging.getLogger(__name__)
@@ -173,7 +174,9 @@ class RqExecutor:
             return
         self.watch(spec.study_id for spec in specs)
         statuses = self._job_statuses([spec.trial_id for spec in specs])
-        fresh = [spec for spec in specs if statuses.get(spec.trial_id) not in ACTIVE_STATES]
+        fresh = longest_first(
+            [spec for spec in specs if statuses.get(spec.trial_id) not in ACTIVE_STATES]
+        )
         if not fresh:
             return
         failed = FailedJobRegistry(queue=self._queue)

@@ -8,7 +8,7 @@ import pytest
 
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import TrialSpec
-from worker.jobs import run_trial
+from worker.jobs import longest_first, run_trial
 
 # Two items, a fraction of a second: the smallest run that still deposits and vibrates.
 # The step is forced: stable for E in 1e6-3e6 Pa, and it divides every stage time, which keeps
@@ -96,3 +96,12 @@ def test_trial_without_snapshots_writes_nothing(tmp_path):
     run_trial(tiny_spec(trial="t-none"), snapshot_root=tmp_path)
 
     assert list(tmp_path.iterdir()) == []
+
+
+def test_longest_first_starts_the_stiffest_trials_first():
+    specs = [TrialSpec(f"t-{i}", "t", i, 0, 0, i, {**PARAMS, "E": E}, TINY_SCENARIO) for i, E in
+             enumerate([1e6, 1e8, 1e7])]
+
+    ordered = longest_first(specs)
+
+    assert [spec.params["E"] for spec in ordered] == [1e8, 1e7, 1e6]
