@@ -344,6 +344,22 @@ def _load(path: Path, name: str) -> Clump | None:
         return None
 
 
+
+def _assemble(centres: np.ndarray, radius: np.ndarray, properties, max_error: float, name: str) -> Clump:
+    """A Clump from sphere centres in mesh coordinates and the mesh's mass properties: the
+    spheres are moved into the principal frame, mass and inertia are the mesh's own."""
+    return Clump(
+        radius=np.asarray(radius, dtype=np.float64),
+        offset=(centres - properties.com) @ properties.principal_axes,
+        mass=properties.mass,
+        inertia=properties.principal_moments,
+        volume=properties.volume,
+        com=properties.com,
+        axes=properties.principal_axes,
+        max_error=max_error,
+        name=name,
+    )
+
 def make_clump(
     mesh: trimesh.Trimesh,
     *,
@@ -395,17 +411,7 @@ def make_clump(
 
     centres, radius = _fit_spheres(mesh, n_spheres, tolerance, min_radius_fraction, seed)
     fit = clump_fit(mesh, centres, radius, seed=seed + 1)
-    clump = Clump(
-        radius=radius.astype(np.float64),
-        offset=(centres - properties.com) @ properties.principal_axes,
-        mass=properties.mass,
-        inertia=properties.principal_moments,
-        volume=properties.volume,
-        com=properties.com,
-        axes=properties.principal_axes,
-        max_error=fit.max_error,
-        name=name,
-    )
+    clump = _assemble(centres, radius, properties, fit.max_error, name)
     logger.info(
         "clump %s: %d spheres, max error %.3g mm, mean gap %.3g mm",
         name or key[:8],
@@ -441,14 +447,4 @@ def deform_clump(
     centres = (clump.com + clump.offset @ clump.axes.T) @ matrix.T
     radius = clump.radius * float(np.linalg.svd(matrix, compute_uv=False).min())
     fit = clump_fit(mesh, centres, radius)
-    return Clump(
-        radius=radius,
-        offset=(centres - properties.com) @ properties.principal_axes,
-        mass=properties.mass,
-        inertia=properties.principal_moments,
-        volume=properties.volume,
-        com=properties.com,
-        axes=properties.principal_axes,
-        max_error=fit.max_error,
-        name=name,
-    )
+    return _assemble(centres, radius, properties, fit.max_error, name)
