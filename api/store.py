@@ -593,14 +593,7 @@ class SqlStore:
             return row
 
     def list_simulations(self, visible_to: str | None, limit: int, offset: int) -> Page:
-        where = _owner_clause(SimulationRow.owner, visible_to)
-        with self.session() as s:
-            total = s.scalar(sa.select(sa.func.count()).select_from(SimulationRow).where(where))
-            rows = s.scalars(
-                sa.select(SimulationRow).where(where)
-                .order_by(SimulationRow.created_at.desc(), SimulationRow.id).limit(limit).offset(offset)
-            ).all()
-            return Page(list(rows), int(total or 0))
+        return self._newest_first(SimulationRow, visible_to, limit, offset)
 
     def pending_simulations(self, limit: int = 100) -> list[TrialSpec]:
         """Single simulations waiting to be enqueued, oldest first, as specs a worker can run.
@@ -687,11 +680,15 @@ class SqlStore:
             return row
 
     def list_shapes(self, visible_to: str | None, limit: int, offset: int) -> Page:
-        where = _owner_clause(ShapeRow.owner, visible_to)
+        return self._newest_first(ShapeRow, visible_to, limit, offset)
+
+    def _newest_first(self, model, visible_to: str | None, limit: int, offset: int) -> Page:
+        """A page of an owned resource (shapes, simulations), newest first, with the total."""
+        where = _owner_clause(model.owner, visible_to)
         with self.session() as s:
-            total = s.scalar(sa.select(sa.func.count()).select_from(ShapeRow).where(where))
+            total = s.scalar(sa.select(sa.func.count()).select_from(model).where(where))
             rows = s.scalars(
-                sa.select(ShapeRow).where(where).order_by(ShapeRow.created_at.desc(), ShapeRow.id)
+                sa.select(model).where(where).order_by(model.created_at.desc(), model.id)
                 .limit(limit).offset(offset)
             ).all()
             return Page(list(rows), int(total or 0))
