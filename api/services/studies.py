@@ -15,6 +15,7 @@ from __future__ import annotations
 from api.auth import Principal
 from api.errors import ConflictError, InvalidInputError
 from api.schemas import Progress, StudyListItem, StudyPage, StudyRead, TrialRead
+from api.services.generations import latest_generation
 from api.services.trials import trial_read
 from api.store import SqlStore
 from optimizer.protocols import StudyStatus, TrialState
@@ -37,15 +38,6 @@ def create_study(
         raise InvalidInputError(str(exc)) from None
     study_id = store.create_study(definition.model_dump(mode="json"), owner=principal.owner)
     return get_study(store, study_id, principal)
-
-
-def latest_generation(batches_recorded: int) -> int:
-    """The index of the latest recorded generation (0 = the initial population).
-
-    The store counts recorded batches (the driver saves batch index + 1); clients compare this
-    with ``generations_total``, so a finished study of n generations reads "n of n".
-    """
-    return max(batches_recorded - 1, 0)
 
 
 def _budget(definition: dict) -> tuple[int, int]:

@@ -32,6 +32,7 @@ from api.schemas import (
     TrialRead,
     finite_or_none,
 )
+from api.services.generations import latest_generation
 from api.services.views import StudyViewCache
 from api.store import SqlStore, TrialFilter
 from optimizer.protocols import PARAMETER_NAMES, StudyStatus
@@ -128,7 +129,7 @@ def pareto_front_json(
         points = sorted(
             (_pareto_point(row) for row in rows), key=lambda p: (_sort_key(p.f1), _sort_key(p.f2))
         )
-        front = ParetoFront(study_id=study_id, generation=study.generation, points=points)
+        front = ParetoFront(study_id=study_id, generation=latest_generation(study.generation), points=points)
         return front.model_dump_json().encode()
 
     return views.get_or_build("pareto", study_id, (study.updated_at, study.generation), build)

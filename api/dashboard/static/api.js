@@ -154,6 +154,12 @@ export function fmt(value, digits = 3) {
   return Number(value.toPrecision(digits)).toString();
 }
 
+// The API's latest generation index: 0 is the initial population, -1 means none recorded yet.
+export function generationText(generation, total) {
+  const latest = generation >= 0 ? String(generation) : "none yet";
+  return total ? `${latest} of ${total}` : latest;
+}
+
 export function fmtTime(iso) {
   if (!iso) return "–";
   const date = new Date(iso);

@@ -2,7 +2,9 @@
 // far (or the best f1 so far) and its start and finish times; refreshed every few seconds. One
 // request per refresh: the list items carry everything the table shows.
 
-import { PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, itemsOf, poll, showBanner, statusBadge } from "./api.js";
+import {
+  PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, poll, showBanner, statusBadge,
+} from "./api.js";
 
 const POLL_MS = 4000;
 
@@ -22,8 +24,7 @@ function recommendationText(item) {
 function row(item) {
   const share = item.trials_total ? Math.min(100, (100 * item.trials_done) / item.trials_total) : 0;
   const link = el("a", { href: `/studies/${encodeURIComponent(item.id)}`, text: item.name || item.id });
-  const generation = item.generations_total
-    ? `${item.generation} of ${item.generations_total}` : String(item.generation);
+  const generation = generationText(item.generation, item.generations_total);
   return el("tr", { "data-study-id": item.id },
     el("td", {}, link, el("div", { class: "muted", text: item.id })),
     el("td", {}, statusBadge(item.status)),

@@ -4,7 +4,7 @@
 // and upserted by id, so a running study costs one small request every few seconds.
 
 import {
-  ApiError, PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, itemsOf, poll,
+  ApiError, PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, poll,
   plotlyReady, showBanner, statusBadge, targetOf,
 } from "./api.js";
 import { CONFIG, generationFigure, paretoFigure, parameterFigure } from "./plots.js";
@@ -53,7 +53,7 @@ function renderHeader() {
   const facts = [
     ["Study id", study.id],
     ["Progress", `${p.trials_done} / ${p.trials_total} trials`],
-    ["Generation", `${p.generation} of ${p.generations_total}`],
+    ["Generation", generationText(p.generation, p.generations_total)],
     ["Target N_t", `${fmt(targetOf(def))} items (tolerance ±${fmt(def.experiment?.tolerance ?? NaN)})`],
     ["Measured N_t", (def.experiment?.measured || []).join(", ")],
     ["Objective f2", def.objective_time === "wall" ? "wall time T (s)" : "cost (machine-independent)"],
