@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
@@ -48,6 +48,9 @@ SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
 StudyViewsDep = Annotated[StudyViewCache, Depends(get_study_views)]
 StoreDep = Annotated[SqlStore, Depends(get_store)]
 SessionDep = Annotated[Session, Depends(get_session)]
+# Paging of the owned-resource lists (studies, shapes, simulations).
+Limit = Annotated[int, Query(ge=1, le=500, description="Page size.")]
+Offset = Annotated[int, Query(ge=0, le=10_000_000, description="Rows to skip.")]
 
 
 def _authenticate(store: SqlStore, token: str | None) -> Principal:

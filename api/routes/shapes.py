@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Query, Response, UploadFile, status
+from fastapi import APIRouter, File, Form, Response, UploadFile, status
 from starlette.concurrency import run_in_threadpool
 
-from api.deps import ApiKeyDep, SettingsDep, StoreDep
+from api.deps import ApiKeyDep, Limit, Offset, SettingsDep, StoreDep
 from api.schemas import ShapePage, ShapeRead
 from api.services import shapes
 
@@ -37,7 +37,7 @@ async def upload_shape(
 @router.get("", response_model=ShapePage)
 def list_shapes(
     principal: ApiKeyDep, store: StoreDep,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50, offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    limit: Limit = 50, offset: Offset = 0,
 ):
     return shapes.list_shapes(store, principal, limit, offset)
 

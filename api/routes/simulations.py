@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from fastapi import APIRouter, status
 
-from fastapi import APIRouter, Query, status
-
-from api.deps import ApiKeyDep, StoreDep
+from api.deps import ApiKeyDep, Limit, Offset, StoreDep
 from api.schemas import SimulationCreate, SimulationPage, SimulationRead
 from api.services import simulations
 
@@ -22,7 +20,7 @@ def create_simulation(request: SimulationCreate, principal: ApiKeyDep, store: St
 @router.get("", response_model=SimulationPage)
 def list_simulations(
     principal: ApiKeyDep, store: StoreDep,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50, offset: Annotated[int, Query(ge=0, le=10_000_000)] = 0,
+    limit: Limit = 50, offset: Offset = 0,
 ):
     return simulations.list_simulations(store, principal, limit, offset)
 

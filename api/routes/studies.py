@@ -8,17 +8,13 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import StreamingResponse
 
-from api.deps import ApiKeyDep, SettingsDep, StoreDep, StudyViewsDep
+from api.deps import ApiKeyDep, Limit, Offset, SettingsDep, StoreDep, StudyViewsDep
 from api.schemas import GenerationSummary, ParetoFront, RecommendationRead, StudyPage, StudyRead
 from api.services import studies, trials
 from optimizer.protocols import StudyStatus
 from optimizer.study import StudyDefinition
 
 router = APIRouter(prefix="/api/v1/studies", tags=["studies"])
-
-Limit = Annotated[int, Query(ge=1, le=500, description="Page size.")]
-Offset = Annotated[int, Query(ge=0, le=10_000_000, description="Rows to skip.")]
-
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=StudyRead)
 def create_study(definition: StudyDefinition, principal: ApiKeyDep, store: StoreDep, settings: SettingsDep):
