@@ -10,7 +10,6 @@ Case: d 10 mm, 2500 kg/m3, E 1e7 Pa, nu 0.3, e 0.5, mu 0.5, box 0.1 x 0.1 m, dt 
 from __future__ import annotations
 
 import argparse
-import math
 import resource
 import shutil
 import subprocess
@@ -43,15 +42,7 @@ def initial_positions(seed: int = 0) -> np.ndarray:
 
 
 def build() -> Simulation:
-    volume = math.pi / 6 * D**3
-    mass = RHO * volume
-    ball = Clump(
-        radius=np.array([D / 2]),
-        offset=np.zeros((1, 3)),
-        mass=mass,
-        inertia=np.full(3, 0.1 * mass * D**2),
-        volume=volume,
-    )
+    ball = Clump.solid_sphere(D / 2, RHO)
     sim = Simulation(PARAMS, domain_min=(-0.06, -0.06, -0.01), domain_max=(0.06, 0.06, 0.3), dt=DT)
     sim.add_wall(WallMesh.box((-BOX / 2, -BOX / 2, 0), (BOX / 2, BOX / 2, 0.3)))
     for p in initial_positions():

@@ -32,6 +32,20 @@ class Clump:
     max_error: float = 0.0  # m, largest distance between mesh surface and clump envelope
     name: str = ""
 
+    @classmethod
+    def solid_sphere(cls, radius: float, density: float, name: str = "sphere") -> Clump:
+        """A one-sphere body of uniform density: the analytic case (I = 2/5 m r^2)."""
+        volume = 4.0 / 3.0 * np.pi * radius**3
+        mass = density * volume
+        return cls(
+            radius=np.array([float(radius)]),
+            offset=np.zeros((1, 3)),
+            mass=mass,
+            inertia=np.full(3, 0.4 * mass * radius**2),
+            volume=volume,
+            name=name,
+        )
+
     @property
     def n_spheres(self) -> int:
         return int(self.radius.shape[0])

@@ -23,15 +23,7 @@ STEP_FRACTION = 1.0 / 100.0  # fine steps: the checks below resolve the contact 
 
 
 def ball(radius: float, density: float = DENSITY) -> Clump:
-    volume = 4.0 / 3.0 * math.pi * radius**3
-    mass = density * volume
-    return Clump(
-        radius=np.array([radius]),
-        offset=np.zeros((1, 3)),
-        mass=mass,
-        inertia=np.full(3, 0.4 * mass * radius**2),
-        volume=volume,
-    )
+    return Clump.solid_sphere(radius, density)
 
 
 def clamped_oscillator(k: float, m: float, zeta: float, v0: float) -> tuple[float, float]:

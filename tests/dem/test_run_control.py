@@ -18,14 +18,7 @@ PARAMS = ContactParams(E=1e6, nu=0.3, e=0.5, mu=0.5)
 
 
 def ball(radius=0.005, density=2500.0) -> Clump:
-    mass = density * 4 / 3 * math.pi * radius**3
-    return Clump(
-        radius=np.array([radius]),
-        offset=np.zeros((1, 3)),
-        mass=mass,
-        inertia=np.full(3, 0.4 * mass * radius**2),
-        volume=4 / 3 * math.pi * radius**3,
-    )
+    return Clump.solid_sphere(radius, density)
 
 
 def dimer(radius=0.004) -> Clump:

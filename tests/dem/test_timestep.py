@@ -58,14 +58,8 @@ def test_thin_plate_hit_at_a_corner_is_lighter_than_its_mass():
 
 def test_sphere_step_is_the_fraction_of_the_contact_duration():
     radius, E = 0.005, 1e7
-    mass = 2500 * 4 / 3 * math.pi * radius**3
-    ball = Clump(
-        radius=np.array([radius]),
-        offset=np.zeros((1, 3)),
-        mass=mass,
-        inertia=np.full(3, 0.4 * mass * radius**2),
-        volume=4 / 3 * math.pi * radius**3,
-    )
+    ball = Clump.solid_sphere(radius, 2500.0)
+    mass = ball.mass
     params = ContactParams(E=E, nu=0.3, e=0.5, mu=0.5)
 
     dt = automatic_time_step([ball], params, [], fraction=1 / 20)

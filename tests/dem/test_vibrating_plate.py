@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from dem.clump import Clump
@@ -19,14 +18,7 @@ FREQUENCY = 10.0
 
 
 def ball(radius=0.005, density=2500.0) -> Clump:
-    mass = density * 4 / 3 * math.pi * radius**3
-    return Clump(
-        radius=np.array([radius]),
-        offset=np.zeros((1, 3)),
-        mass=mass,
-        inertia=np.full(3, 0.4 * mass * radius**2),
-        volume=4 / 3 * math.pi * radius**3,
-    )
+    return Clump.solid_sphere(radius, density)
 
 
 def first_free_flight(gamma: float, start: float = 0.05) -> tuple[float | None, float]:
