@@ -1,7 +1,9 @@
 # One image for every demcal process: `demcal serve` (API, dashboard, study driver),
 # `demcal worker` (DEM trials from the Redis queue) and `demcal db upgrade` (migrations).
-# Used by docker-compose.yml; build with `docker build -t demcal .`.
-FROM python:3.11-slim
+# Used by docker-compose.yml; build with `docker build -t demcal .`. The `liggghts` target adds
+# Debian's LIGGGHTS for workers that run the LIGGGHTS engine (dem/engines/liggghts.py):
+# `docker build --target liggghts -t demcal-liggghts .`.
+FROM python:3.11-slim AS demcal
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
@@ -34,3 +36,15 @@ WORKDIR /home/demcal
 
 EXPOSE 8000
 CMD ["demcal", "serve"]
+
+# Workers with LIGGGHTS: the same image plus Debian's package (MPI singleton runs, one core each).
+FROM demcal AS liggghts
+USER root
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends liggghts \
+    && rm -rf /var/lib/apt/lists/* \
+    && liggghts -h > /dev/null
+USER demcal
+
+# The default target: the plain image.
+FROM demcal

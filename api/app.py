@@ -18,7 +18,7 @@ from api import __version__
 from api.auth import KeyCache
 from api.dashboard import dashboard_router
 from api.db import check_schema_current, create_db_engine
-from api.deps import reject_unknown_query
+from api.deps import reject_impossible_ids, reject_unknown_query
 from api.errors import PayloadTooLargeError, install_error_handlers
 from api.routes import health, metrics, shapes, simulations, studies, trials
 from api.schemas import ErrorDetail
@@ -103,14 +103,16 @@ def create_app(settings: Settings, engine: sa.Engine | None = None) -> FastAPI:
     app.state.key_cache = KeyCache(settings.api_key_cache_s)
     app.state.study_views = StudyViewCache()
     install_error_handlers(app)
-    strict_query = [Depends(reject_unknown_query)]
+    strict_query = [Depends(reject_unknown_query), Depends(reject_impossible_ids)]
     for module in (studies, trials, simulations, shapes, metrics):
         app.include_router(module.router, responses=ERROR_RESPONSES, dependencies=strict_query)
     app.include_router(
         health.router, responses={413: ERROR_RESPONSES[413], 422: ERROR_RESPONSES[422]},
         dependencies=strict_query,
     )
-    app.include_router(dashboard_router(), responses=ERROR_RESPONSES)
+    app.include_router(
+        dashboard_router(), responses=ERROR_RESPONSES, dependencies=[Depends(reject_impossible_ids)]
+    )
     app.add_middleware(
         BodySizeLimit,
         max_request_bytes=settings.max_request_bytes,

@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "api.commands.calibrate",
     "api.commands.simulate",
     "api.commands.render",
+    "api.commands.studies",
 )
 
 app = typer.Typer(

@@ -5,7 +5,7 @@ transaction helper (``unit_of_work``: commit on exit, roll back on error, as opt
 ``_create_scoped_session``), and run or check Alembic migrations with a configuration built in
 code, so that it works from an installed package without an ``alembic.ini``.
 
-What it must not do: know about tables' meaning (``api/store.py``) or create tables behind
+What it must not do: know about tables' meaning (``api/store/``) or create tables behind
 Alembic's back; the schema comes from migrations only, in tests as in production.
 """
 

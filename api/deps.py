@@ -1,4 +1,4 @@
-"""FastAPI dependencies as typed aliases: the settings, the store, a session and the caller.
+"""FastAPI dependencies as typed aliases: the settings, the store and the caller.
 
 ``ApiKeyDep`` authenticates the ``Authorization: Bearer <key>`` header on every route that uses
 it (all but health); a missing, unknown or revoked key is a 401 that says how to get one.
@@ -10,16 +10,14 @@ load. The key check goes to the thread pool only when the key is not in the shor
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Annotated
 
 from fastapi import Depends, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from sqlalchemy.orm import Session
 
 from api.auth import KeyCache, Principal, authenticate
-from api.errors import InvalidInputError
+from api.errors import InvalidInputError, NotFoundError
 from api.services.views import StudyViewCache
 from api.settings import Settings
 from api.store import SqlStore
@@ -35,11 +33,6 @@ async def get_store(request: Request) -> SqlStore:
     return request.app.state.store
 
 
-def get_session(request: Request) -> Iterator[Session]:
-    with request.app.state.store.session() as session:
-        yield session
-
-
 async def get_study_views(request: Request) -> StudyViewCache:
     return request.app.state.study_views
 
@@ -47,7 +40,6 @@ async def get_study_views(request: Request) -> StudyViewCache:
 SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
 StudyViewsDep = Annotated[StudyViewCache, Depends(get_study_views)]
 StoreDep = Annotated[SqlStore, Depends(get_store)]
-SessionDep = Annotated[Session, Depends(get_session)]
 # Paging of the owned-resource lists (studies, shapes, simulations).
 Limit = Annotated[int, Query(ge=1, le=500, description="Page size.")]
 Offset = Annotated[int, Query(ge=0, le=10_000_000, description="Rows to skip.")]
@@ -73,6 +65,14 @@ async def require_key(
 
 
 ApiKeyDep = Annotated[Principal, Depends(require_key)]
+
+
+async def reject_impossible_ids(request: Request) -> None:
+    """An id with a NUL character (``/studies/%00``) names nothing: 404 here, because PostgreSQL
+    refuses NUL in text and the lookup would otherwise end in a 500."""
+    for name, value in request.path_params.items():
+        if isinstance(value, str) and "\x00" in value:
+            raise NotFoundError(f"no such {name.removesuffix('_id')}: ids never contain a NUL character")
 
 
 async def reject_unknown_query(request: Request) -> None:

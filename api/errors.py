@@ -55,13 +55,25 @@ class AuthenticationError(DemcalError):
     status_code = 401
 
 
-def _validation_message(exc: RequestValidationError) -> str:
+def _validation_message(exc: RequestValidationError, body_model=None) -> str:
+    """One part per error: the field's path once (not again when the message starts with it),
+    and for an unknown key the nearest valid one of the request's body model."""
+    from dem.scenarios.base import error_message
+
     parts = []
     for err in exc.errors():
-        location = ".".join(str(p) for p in err.get("loc", ()) if p not in ("body",))
-        message = str(err.get("msg", "invalid")).removeprefix("Value error, ")
-        parts.append(f"{location}: {message}" if location else message)
+        loc = tuple(p for p in err.get("loc", ()) if p != "body")
+        location = ".".join(str(p) for p in loc)
+        message = error_message({**err, "loc": loc}, body_model)
+        parts.append(f"{location}: {message}" if location and not message.startswith(location) else message)
     return "; ".join(parts) or "the request is not valid"
+
+
+def _body_model(request: Request):
+    """The pydantic model of the route's JSON body, if it has one."""
+    field = getattr(request.scope.get("route"), "body_field", None)
+    model = getattr(getattr(field, "field_info", None), "annotation", None)
+    return model if isinstance(model, type) and hasattr(model, "model_fields") else None
 
 
 def install_error_handlers(app: FastAPI) -> None:
@@ -72,7 +84,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(RequestValidationError)
     async def _invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
-        return JSONResponse({"detail": _validation_message(exc)}, status_code=422)
+        return JSONResponse({"detail": _validation_message(exc, _body_model(request))}, status_code=422)
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:

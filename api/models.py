@@ -1,7 +1,7 @@
 """The store's tables (SQLAlchemy 2 declarative models), and nothing else.
 
 These classes are the rows. They are never sent on the wire (``api/schemas.py`` holds the wire
-models) and carry no business rules (``api/store.py`` and ``api/services/`` do). Every change here
+models) and carry no business rules (``api/store/`` and ``api/services/`` do). Every change here
 needs an Alembic migration in ``migrations/versions/``: the server refuses to start on a schema
 that is not at the head revision.
 
@@ -111,6 +111,9 @@ class StudyRow(Base):
     # Set by the store on the first move to running and on the move to done, cancelled or failed.
     started_at: Mapped[datetime | None]
     finished_at: Mapped[datetime | None]
+    # The lease of the process driving the study (``api/store/leases.py``): who, and until when.
+    driver: Mapped[str | None] = mapped_column(sa.String(200))
+    driver_until: Mapped[datetime | None]
 
     trials: Mapped[list[TrialRow]] = relationship(
         back_populates="study", cascade="all, delete-orphan", passive_deletes=True, lazy="raise"
@@ -142,6 +145,9 @@ class TrialRow(Base):
     # Result fields, copied out of the JSON result so that lists and plots need no JSON parsing.
     status: Mapped[str | None] = mapped_column(sa.String(16))
     n_remaining: Mapped[int | None]
+    responses: Mapped[dict[str, Any] | None]  # the scenario's named responses (migration 0004)
+    engine: Mapped[str] = mapped_column(sa.String(32), default="numba", server_default="numba")
+    engine_options: Mapped[dict[str, Any] | None]
     wall_time_s: Mapped[float | None]
     cost: Mapped[float | None]
     dt: Mapped[float | None]
@@ -210,6 +216,8 @@ class SimulationRow(Base):
     state: Mapped[str] = mapped_column(sa.String(16), index=True)
     status: Mapped[str | None] = mapped_column(sa.String(16))
     n_remaining: Mapped[int | None]
+    responses: Mapped[dict[str, Any] | None]
+    engine: Mapped[str] = mapped_column(sa.String(32), default="numba", server_default="numba")
     wall_time_s: Mapped[float | None]
     result: Mapped[dict[str, Any] | None]
     worker: Mapped[str | None] = mapped_column(sa.String(200))

@@ -28,10 +28,19 @@ def finite_or_none(value: float | None) -> float | None:
     return value if value is not None and math.isfinite(value) else None
 
 
+class Failures(_Wire):
+    """Finished runs that measured nothing, by status (invalid, unstable, timeout, error, cancelled)."""
+
+    total: int
+    by_status: dict[str, int]
+    text: str = Field(description="The sentence every view prints: 'failed: 3 (unstable 2, timeout 1)'.")
+
+
 class Progress(_Wire):
     trials_total: int = Field(description="Simulations the study's budget allows (upper bound).")
     trials_done: int
     trials_by_state: dict[str, int]
+    failures: Failures = Field(description="Finished trials whose simulation measured no N_t.")
     generation: int
     generations_total: int
 
@@ -47,7 +56,14 @@ class TrialRead(_Wire):
     params: dict[str, float]
     state: TrialState
     status: str | None = Field(None, description="How the simulation ended: ok, unstable, timeout, error.")
-    n_remaining: int | None = Field(None, description="N_t: items left in the tray.")
+    n_remaining: int | None = Field(
+        None, description="N_t: items left in the tray; null unless the run ended ok (the full "
+        "result keeps the count where a failed run stopped)."
+    )
+    responses: dict[str, float | None] | None = Field(
+        None, description="The scenario's named responses (units in the study's 'responses')."
+    )
+    engine: str = Field("numba", description="The engine that runs it.")
     wall_time_s: float | None = Field(None, description="T: wall-clock seconds of the simulation.")
     cost: float | None = Field(None, description="Machine-independent cost of the simulation.")
     f1: float | None = Field(None, description="Objective 1, |N_t - target| (null: not ranked or failed).")
@@ -99,6 +115,7 @@ class StudyListItem(_Wire):
         "equivalent sets (GET /api/v1/studies/{id}/recommendation has them)."
     )
     best_f1: float | None = Field(None, description="The lowest f1 of an ok trial so far.")
+    failures: Failures | None = Field(None, description="Finished trials that measured no N_t, by status.")
 
 
 class StudyPage(_Wire):
@@ -106,6 +123,16 @@ class StudyPage(_Wire):
     total: int
     limit: int
     offset: int
+
+
+class ResponseRead(_Wire):
+    """One response a scenario declares (``dem.scenarios.base.Response``)."""
+
+    name: str
+    unit: str = Field(description="'1' for counts and other pure numbers.")
+    type: Literal["integer", "real"]
+    failed_value: float = Field(description="What a failed simulation counts as in the objectives.")
+    description: str = ""
 
 
 class StudyRead(_Wire):
@@ -117,11 +144,22 @@ class StudyRead(_Wire):
     definition: dict[str, Any]
     progress: Progress
     best: TrialRead | None = Field(None, description="Lowest f1 so far, fastest among equals.")
-    recommendation: dict[str, Any] | None = None
+    recommendation: dict[str, Any] | None = Field(
+        None,
+        description="The fastest validated set, its 'validation_status' (validated, not "
+        "reproduced, not validated) and, after the validation, the 'validation' table.",
+    )
+    warnings: list[str] = Field(
+        default_factory=list, description="What to know before trusting the study (bounds in the "
+        "contact model's invalid region).",
+    )
     created_at: datetime
     updated_at: datetime
     started_at: datetime | None = Field(None, description="When the study first started running.")
     finished_at: datetime | None = Field(None, description="When it became done, cancelled or failed.")
+    responses: list[ResponseRead] = Field(
+        default_factory=list, description="What the study's scenario measures, with units."
+    )
 
 
 class Spread(_Wire):
@@ -139,8 +177,10 @@ class GenerationSummary(_Wire):
     trials: int
     done: int
     ok: int
-    failed: int
+    failed: int = Field(description="Finished trials that measured nothing; by status in failed_by_status.")
+    failed_by_status: dict[str, int]
     n_remaining: Spread | None
+    responses: dict[str, Spread] = Field(default_factory=dict, description="Each response's spread.")
     wall_time_s: Spread | None
     cost: Spread | None
     best_f1: float | None
@@ -155,6 +195,7 @@ class ParetoPoint(_Wire):
     replicate: int
     params: dict[str, float]
     n_remaining: int | None
+    responses: dict[str, float | None] | None = None
     wall_time_s: float | None
     cost: float | None
     f1: float | None
@@ -165,6 +206,60 @@ class ParetoFront(_Wire):
     study_id: str
     generation: int
     points: list[ParetoPoint]
+
+
+class ProgressPoint(_Wire):
+    """Where the study stood when one batch was complete."""
+
+    batch: int
+    simulations: int = Field(description="Finished simulations of this batch and the earlier ones.")
+    failed: int = Field(description="Of them, runs that measured nothing.")
+    hypervolume: float | None = Field(
+        None, description="Fraction of the reference box the measured (f1, f2) dominate (pymoo HV)."
+    )
+    best_f1: float | None
+    best_validated_f1: float | None = Field(
+        None, description="Lowest f1 among sets a validation on fresh seeds confirmed (null: none yet)."
+    )
+
+
+class ObjectiveReference(_Wire):
+    f1: float = Field(description="The number of items: f1 never exceeds it.")
+    f2: float = Field(description="1.1 x the largest f2 measured in the initial population.")
+
+
+class StudyProgressRead(_Wire):
+    """Hypervolume and best f1 against simulations, one point per completed batch."""
+
+    study_id: str
+    reference: ObjectiveReference | None = Field(
+        None, description="The hypervolume's reference point, fixed once the initial population is "
+        "complete, so values of one study compare across batches (null before that)."
+    )
+    points: list[ProgressPoint]
+
+
+class ParameterIdentifiability(_Wire):
+    name: str
+    first_order: float = Field(description="Sobol first-order index of the response model's mean.")
+    total: float = Field(description="Sobol total index: how much N_t depends on it, interactions included.")
+    length_scale: float = Field(description="The Gaussian process's ARD length scale (long = flat).")
+    matching_sets: int
+    matching_range: list[float] | None = Field(None, description="[low, high] over the matching sets.")
+    matching_spread: float | None = Field(
+        None, description="The matching sets' range as a share of the searched range (log for E)."
+    )
+    verdict: Literal["pinned", "weak", "not identifiable"]
+
+
+class IdentifiabilityRead(_Wire):
+    """Which searched parameters the experiment pins down (``optimizer/identifiability.py``)."""
+
+    study_id: str
+    method: str
+    simulations: int = Field(description="Successful simulations the indices come from.")
+    parameters: list[ParameterIdentifiability]
+    reason: str = Field("", description="Why there are no indices yet, if there are none.")
 
 
 class RecommendationRead(_Wire):
@@ -182,17 +277,20 @@ class RecommendationRead(_Wire):
 class SimulationCreate(BaseModel):
     """One simulation to run outside any study."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    scenario: dict[str, Any] = Field(description="A feeder configuration (dem.scenarios.feeder).")
+    scenario: dict[str, Any] = Field(
+        description="A scenario configuration; its kind (default feeder) picks it from the registry."
+    )
     params: dict[str, float] = Field(description="E (Pa), nu, e, mu.")
     seed: int = Field(0, ge=0, le=2**31 - 1)
     timeout_s: float | None = Field(None, gt=0, le=7 * 24 * 3600)
+    engine: str = Field("numba", max_length=32, description="numba (built in) or liggghts.")
 
     @field_validator("params")
     @classmethod
     def _four_parameters(cls, params: dict[str, float]) -> dict[str, float]:
-        from optimizer.study import PHYSICAL_RANGES
+        from dem.parameters import range_problem
 
         missing = [name for name in PARAMETER_NAMES if name not in params]
         unknown = [name for name in params if name not in PARAMETER_NAMES]
@@ -201,15 +299,9 @@ class SimulationCreate(BaseModel):
                 f"give exactly E, nu, e, mu (missing: {missing or 'none'}, unknown: {unknown or 'none'})"
             )
         for name, value in params.items():
-            low, high, low_in, high_in = PHYSICAL_RANGES[name]
-            above = value >= low if low_in else value > low
-            below = value <= high if high_in else value < high
-            inside = above and below
-            if not (math.isfinite(value) and inside):
-                raise ValueError(
-                    f"{name} = {value} is outside its physical range "
-                    f"{'[' if low_in else '('}{low:g}, {high:g}{']' if high_in else ')'}"
-                )
+            problem = range_problem(name, value)
+            if problem is not None:
+                raise ValueError(problem)
         return params
 
 
@@ -220,7 +312,9 @@ class SimulationRead(_Wire):
     scenario: dict[str, Any]
     params: dict[str, float]
     seed: int
+    engine: str = "numba"
     n_remaining: int | None
+    responses: dict[str, float | None] | None = None
     wall_time_s: float | None
     result: dict[str, Any] | None
     worker: str | None
@@ -267,4 +361,6 @@ class Health(BaseModel):
     database: str
     redis: str
     workers: int | None = Field(None, description="RQ workers registered on the queue (null without Redis).")
+    queued: int | None = Field(None, description="Jobs waiting on the queue (null without Redis).")
+    problem: str | None = Field(None, description="Why the status is degraded, when it is.")
     version: str

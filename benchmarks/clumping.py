@@ -47,8 +47,8 @@ def main() -> None:
                 label, lambda: default_items(np.random.default_rng(1), resolution=24, cache_dir=cache)
             )
         for kind in ("smartphone", "feature_phone", "camera"):
-            errors = [item.clump.max_error * 1e3 for item in items if item.kind == kind]
-            print(f"    {kind:<14s} spheres {items[[i.kind for i in items].index(kind)].clump.n_spheres}, "
+            errors = [item.shape.max_error * 1e3 for item in items if item.kind == kind]
+            print(f"    {kind:<14s} spheres {items[[i.kind for i in items].index(kind)].shape.n_spheres}, "
                   f"max error {min(errors):.1f}-{max(errors):.1f} mm")
 
 

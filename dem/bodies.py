@@ -5,14 +5,58 @@ row per sphere, stored contiguously body after body, so that a body's spheres ar
 ``sphere_start[b] : sphere_start[b] + sphere_count[b]``. The angular state is the world-frame
 angular momentum ``angmom``; ``omega`` (world frame) is derived from it and kept current by the
 kernels. Arrays grow by reallocation when bodies are added between runs; the kernels never
-allocate. This module does no physics.
+allocate. ``arrays()`` hands the kernels the rows in use as a ``BodyArrays`` / ``SphereArrays``
+named tuple (numba passes one as cheaply as its arrays). This module does no physics.
+
+A rounded polyhedron (``dem/polyhedra.py``) takes one sphere row per convex piece: the piece's
+bounding sphere (``radius`` its reach, ``offset`` its centre) serves the neighbour search, and
+``core_start``/``core_count`` point at the piece's core vertices in ``core`` (body frame), with
+``rounding`` its r. A clump's spheres have ``core_count`` 0 and ``rounding`` = ``radius``.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from dem.clump import Clump
+from dem.convex import scratch
+from dem.polyhedra import Polyhedron
+
+
+class BodyArrays(NamedTuple):
+    """What the kernels read and write of the bodies (rows in use only)."""
+
+    pos: np.ndarray  # (n, 3) centre of mass, m
+    vel: np.ndarray  # (n, 3)
+    quat: np.ndarray  # (n, 4) orientation, body to world
+    angmom: np.ndarray  # (n, 3) world-frame angular momentum
+    omega: np.ndarray  # (n, 3) world-frame angular velocity, derived from angmom
+    rot: np.ndarray  # (n, 3, 3) rotation matrix of quat
+    force: np.ndarray  # (n, 3)
+    torque: np.ndarray  # (n, 3)
+    mass: np.ndarray  # (n,)
+    inertia: np.ndarray  # (n, 3) principal moments
+    diameter: np.ndarray  # (n,) contact diameter of the contact law
+    active: np.ndarray  # (n,) bool
+    material: np.ndarray  # (n,) int64 index into the simulation's MaterialTable
+
+
+class SphereArrays(NamedTuple):
+    """What the kernels read and write of the spheres (rows in use only)."""
+
+    body: np.ndarray  # (n,) owning body
+    radius: np.ndarray  # (n,)
+    offset: np.ndarray  # (n, 3) centre in the body frame
+    x: np.ndarray  # (n, 3) world centre, written by the kernels
+    rounding: np.ndarray  # (n,) r of a polyhedron piece; a sphere's radius
+    core_start: np.ndarray  # (n,) int64 first core vertex of a piece
+    core_count: np.ndarray  # (n,) int64 its number of core vertices; 0 for a clump's sphere
+    core: np.ndarray  # (m, 3) every piece's core vertices, body frame
+    eye: np.ndarray  # (3, 3) identity: the rotation of points given in world coordinates
+    zero: np.ndarray  # (3,)
+    work: np.ndarray  # scratch of the contact patch (dem.convex.scratch)
 
 
 class Bodies:
@@ -34,8 +78,15 @@ class Bodies:
         "sphere_count": (),
         "active": (),
         "clump_type": (),
+        "material": (),
     }
-    _DTYPES = {"sphere_start": np.int64, "sphere_count": np.int64, "active": np.bool_, "clump_type": np.int64}
+    _DTYPES = {
+        "sphere_start": np.int64,
+        "sphere_count": np.int64,
+        "active": np.bool_,
+        "clump_type": np.int64,
+        "material": np.int64,
+    }
 
     def __init__(self) -> None:
         self.n = 0
@@ -47,9 +98,9 @@ class Bodies:
             return self.__dict__["_" + name][: self.n]
         raise AttributeError(name)
 
-    def raw(self, name: str) -> np.ndarray:
-        """The full (capacity-sized) array, for the kernels."""
-        return self.__dict__["_" + name]
+    def arrays(self) -> BodyArrays:
+        """Views of the rows in use, for the kernels."""
+        return BodyArrays(*(self.__dict__["_" + name][: self.n] for name in BodyArrays._fields))
 
     def append(self, **values) -> int:
         if self.n == len(self._pos):
@@ -66,8 +117,28 @@ class Bodies:
         return i
 
 
+def sphere_rows(shape: Clump | Polyhedron):
+    """(radius, offset, rounding, core_start, core_count) of a shape's sphere rows; core_start is
+    relative to the shape's own ``core``."""
+    if isinstance(shape, Polyhedron):
+        n = shape.n_pieces
+        return (
+            np.array([shape.piece_reach(k) for k in range(n)]),
+            np.array([shape.piece_centre(k) for k in range(n)]),
+            np.full(n, shape.rounding),
+            np.asarray(shape.piece_start, dtype=np.int64),
+            np.asarray(shape.piece_count, dtype=np.int64),
+        )
+    n = shape.n_spheres
+    radius = np.asarray(shape.radius, dtype=np.float64)
+    return radius, np.asarray(shape.offset), radius, np.zeros(n, np.int64), np.zeros(n, np.int64)
+
+
 class Spheres:
-    """Per-sphere arrays: owning body, radius, body-frame offset, world position."""
+    """Per-sphere arrays: owning body, radius, body-frame offset, world position, and for the
+    pieces of rounded polyhedra their rounding and core vertices."""
+
+    _ARRAYS = ("_body", "_radius", "_offset", "_x", "_rounding", "_core_start", "_core_count")
 
     def __init__(self) -> None:
         self.n = 0
@@ -75,6 +146,12 @@ class Spheres:
         self._radius = np.zeros(0)
         self._offset = np.zeros((0, 3))
         self._x = np.zeros((0, 3))
+        self._rounding = np.zeros(0)
+        self._core_start = np.zeros(0, dtype=np.int64)
+        self._core_count = np.zeros(0, dtype=np.int64)
+        self._core = np.zeros((1, 3))  # one dummy row: never empty
+        self._n_core = 0
+        self._eye, self._zero, self._work = np.eye(3), np.zeros(3), scratch()
 
     @property
     def body(self) -> np.ndarray:
@@ -92,19 +169,55 @@ class Spheres:
     def x(self) -> np.ndarray:
         return self._x[: self.n]
 
-    def append(self, body: int, clump: Clump, x: np.ndarray) -> int:
-        k = clump.n_spheres
+    @property
+    def rounding(self) -> np.ndarray:
+        return self._rounding[: self.n]
+
+    @property
+    def core_count(self) -> np.ndarray:
+        return self._core_count[: self.n]
+
+    def arrays(self) -> SphereArrays:
+        """Views of the rows in use, for the kernels."""
+        return SphereArrays(
+            self.body,
+            self.radius,
+            self.offset,
+            self.x,
+            self.rounding,
+            self._core_start[: self.n],
+            self.core_count,
+            self._core,
+            self._eye,
+            self._zero,
+            self._work,
+        )
+
+    def append(self, body: int, shape: Clump | Polyhedron, rot: np.ndarray, position: np.ndarray) -> int:
+        radius, offset, rounding, core_start, core_count = sphere_rows(shape)
+        k = len(radius)
         if self.n + k > len(self._radius):
             capacity = max(64, 2 * (self.n + k))
-            for name in ("_body", "_radius", "_offset", "_x"):
+            for name in self._ARRAYS:
                 old = getattr(self, name)
                 new = np.zeros((capacity, *old.shape[1:]), dtype=old.dtype)
                 new[: self.n] = old[: self.n]
                 setattr(self, name, new)
         start = self.n
         self._body[start : start + k] = body
-        self._radius[start : start + k] = clump.radius
-        self._offset[start : start + k] = clump.offset
-        self._x[start : start + k] = x
+        self._radius[start : start + k] = radius
+        self._offset[start : start + k] = offset
+        self._x[start : start + k] = position + offset @ rot.T
+        self._rounding[start : start + k] = rounding
+        self._core_count[start : start + k] = core_count
+        if isinstance(shape, Polyhedron):
+            vertices = np.asarray(shape.core, dtype=np.float64)
+            if self._n_core + len(vertices) > len(self._core):
+                grown = np.zeros((max(256, 2 * (self._n_core + len(vertices))), 3))
+                grown[: self._n_core] = self._core[: self._n_core]
+                self._core = grown
+            self._core[self._n_core : self._n_core + len(vertices)] = vertices
+            self._core_start[start : start + k] = self._n_core + core_start
+            self._n_core += len(vertices)
         self.n += k
         return start

@@ -46,7 +46,7 @@ its energy per second through rotating multi-sphere contacts; p = 4 keeps it wit
 ``|F_t,k| <= mu F_n,k``, so the pair's total friction is ``mu`` times its total normal force.
 
 This module must not know about neighbour lists, bodies or walls: it maps one sphere contact's
-kinematics to a force.
+kinematics to a force (``dem/forces.py`` applies it to every listed pair).
 """
 
 from __future__ import annotations
@@ -58,6 +58,8 @@ from functools import lru_cache
 import numba
 
 from dem.conf import JIT_FLAGS
+from dem.convex import plane_basis
+from dem.parameters import PARAMETER_NAMES, range_problem
 
 # The clamp-corrected damping ratio for e -> 0 grows without bound; past this the contact is a
 # pure dashpot for all practical purposes (realised e ~ 1 / (4 zeta^2) = 2.5e-5).
@@ -78,18 +80,10 @@ class ContactParams:
     mu: float  # Coulomb friction coefficient
 
     def __post_init__(self) -> None:
-        for name in ("E", "nu", "e", "mu"):
-            value = getattr(self, name)
-            if not isinstance(value, int | float) or not math.isfinite(value):
-                raise ContactParamsError(f"{name} must be a finite number, got {value!r}")
-        if self.E <= 0:
-            raise ContactParamsError(f"E (Young's modulus) must be > 0 Pa, got {self.E}")
-        if not -1.0 < self.nu < 0.5:
-            raise ContactParamsError(f"nu (Poisson's ratio) must be in (-1, 0.5), got {self.nu}")
-        if not 0.0 < self.e <= 1.0:
-            raise ContactParamsError(f"e (restitution) must be in (0, 1], got {self.e}")
-        if self.mu < 0:
-            raise ContactParamsError(f"mu (friction) must be >= 0, got {self.mu}")
+        for name in PARAMETER_NAMES:
+            problem = range_problem(name, getattr(self, name))
+            if problem is not None:
+                raise ContactParamsError(problem)
 
     @property
     def damping_ratio(self) -> float:
@@ -102,7 +96,7 @@ class ContactParams:
         return tangential_stiffness_ratio(self.nu)
 
     def as_dict(self) -> dict[str, float]:
-        return {"E": float(self.E), "nu": float(self.nu), "e": float(self.e), "mu": float(self.mu)}
+        return {name: float(getattr(self, name)) for name in PARAMETER_NAMES}
 
 
 def body_stiffness(E: float, D: float) -> float:
@@ -156,20 +150,6 @@ def restitution_with_clamp(zeta: float) -> float:
     r1, r2 = -zeta + root, -zeta - root
     t_end = 2.0 * math.log(r2 / r1) / (r1 - r2)
     return -(r1 * math.exp(r1 * t_end) - r2 * math.exp(r2 * t_end)) / (r1 - r2)
-
-
-def contact_time_with_clamp(zeta: float) -> float:
-    """Duration (in units of 1/omega_0) of a clamped impact: from first touch until F_n = 0."""
-    if zeta <= 0.0:
-        return math.pi
-    if abs(zeta - 1.0) < 1e-7:
-        zeta = 1.0 - 1e-7
-    if zeta < 1.0:
-        wd = math.sqrt(1.0 - zeta * zeta)
-        return (math.pi - math.atan2(2.0 * zeta * wd, 1.0 - 2.0 * zeta * zeta)) / wd
-    root = math.sqrt(zeta * zeta - 1.0)
-    r1, r2 = -zeta + root, -zeta - root
-    return 2.0 * math.log(r2 / r1) / (r1 - r2)
 
 
 @lru_cache(maxsize=1024)
@@ -257,3 +237,37 @@ def sphere_contact_force(nx, ny, nz, delta, vx, vy, vz, weight, k_n, c_n, k_t, c
     hist[h, 1] = sy
     hist[h, 2] = sz
     return f_n * nx + ftx, f_n * ny + fty, f_n * nz + ftz, f_n
+
+
+@numba.njit(**JIT_FLAGS)
+def patch_damping(nx, ny, nz, s_uu, s_uw, s_ww, wx, wy, wz, c_n, c_t, max_spin):
+    """Torque on the first partner of a face contact from the dampers spread over its patch.
+
+    A rounded polyhedron's face contact is one force at the patch's centre of pressure
+    (``dem/convex.py``), whose normal damper cannot resist rocking or spinning about that
+    point. The law's dampers belong to the whole patch (a Winkler foundation): normal dampers of
+    total ``c_n`` spread over it resist the relative rocking ``omega`` with ``-c_n M omega``,
+    ``M = s_ww u u^T - s_uw (u w^T + w u^T) + s_uu w w^T`` from the patch's second moments per unit
+    area (``s_uu = <u^2>`` about the centre, ``plane_basis(n)``), so rocking is damped like the
+    normal motion; tangential dampers resist spinning about n with ``-c_t (s_uu + s_ww) omega_n``,
+    capped at ``max_spin sqrt(s_uu + s_ww)`` (Coulomb: ``mu F_n`` times the patch's radius of
+    gyration). Only dissipates; zero for a point contact (all moments 0).
+    """
+    ux, uy, uz, vx, vy, vz = plane_basis(nx, ny, nz)
+    om_u = ux * wx + uy * wy + uz * wz
+    om_w = vx * wx + vy * wy + vz * wz
+    om_n = nx * wx + ny * wy + nz * wz
+    t_u = -c_n * (s_ww * om_u - s_uw * om_w)
+    t_w = -c_n * (s_uu * om_w - s_uw * om_u)
+    polar = s_uu + s_ww
+    t_n = -c_t * polar * om_n
+    cap = max_spin * math.sqrt(max(polar, 0.0))
+    if t_n > cap:
+        t_n = cap
+    elif t_n < -cap:
+        t_n = -cap
+    return (
+        t_u * ux + t_w * vx + t_n * nx,
+        t_u * uy + t_w * vy + t_n * ny,
+        t_u * uz + t_w * vz + t_n * nz,
+    )

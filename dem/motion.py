@@ -16,9 +16,12 @@ import numpy as np
 from dem.conf import JIT_FLAGS
 
 # Layout of a motion row: kind, direction (3), amplitude, frequency, start_time, ramp_time, phase.
+# A lift uses the amplitude slot for its distance and the frequency slot for its speed, so the
+# kernel's neighbour-list margin (twice the amplitude) covers the whole travel.
 MOTION_ROW = 9
 _STATIC = 0.0
 _SINE = 1.0
+_LIFT = 2.0
 
 
 class MotionError(ValueError):
@@ -79,7 +82,47 @@ class SinusoidalTranslation:
         return evaluate(self.row(), t)[2]
 
 
-Motion = SinusoidalTranslation
+@dataclass(frozen=True)
+class LinearLift:
+    """d(t) = min(v tau, L) u for tau = t - start_time >= 0, zero before: the wall starts moving
+    at ``speed`` v along the unit vector u at ``start_time`` and stops after ``distance`` L.
+
+    This is how an angle-of-repose cylinder is lifted off its plate (a constant lifting speed,
+    as in the test rigs); the speed jumps at both ends, which a kinematic wall may do.
+    """
+
+    direction: tuple[float, float, float]
+    distance: float
+    speed: float
+    start_time: float = 0.0
+
+    def __post_init__(self) -> None:
+        direction = np.asarray(self.direction, dtype=np.float64).reshape(-1)
+        if direction.shape != (3,) or not np.all(np.isfinite(direction)) or not np.any(direction):
+            raise MotionError(f"direction must be a non-zero 3-vector, got {self.direction!r}")
+        object.__setattr__(self, "direction", tuple(float(v) for v in direction / np.linalg.norm(direction)))
+        for name in ("distance", "start_time"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0:
+                raise MotionError(f"{name} must be a finite number >= 0, got {value!r}")
+        if not math.isfinite(self.speed) or self.speed <= 0:
+            raise MotionError(f"speed must be a finite number > 0, got {self.speed!r}")
+
+    def row(self) -> np.ndarray:
+        return np.array([_LIFT, *self.direction, self.distance, self.speed, self.start_time, 0.0, 0.0])
+
+    def displacement(self, t: float) -> np.ndarray:
+        return evaluate(self.row(), t)[0]
+
+    def velocity(self, t: float) -> np.ndarray:
+        return evaluate(self.row(), t)[1]
+
+    @property
+    def end_time(self) -> float:
+        return self.start_time + self.distance / self.speed
+
+
+Motion = SinusoidalTranslation | LinearLift
 
 
 def motion_row(motion: Motion | None) -> np.ndarray:
@@ -117,6 +160,13 @@ def evaluate_into(row, t, disp, vel):
 def _scalar_state(row, t):
     if row[0] == _STATIC:
         return 0.0, 0.0, 0.0
+    if row[0] == _LIFT:
+        tau = t - row[6]
+        if tau <= 0.0:
+            return 0.0, 0.0, 0.0
+        if tau * row[5] >= row[4]:
+            return row[4], 0.0, 0.0
+        return tau * row[5], row[5], 0.0
     amp, freq, start, ramp = row[4], row[5], row[6], row[7]
     tau = t - start
     if tau <= 0.0:

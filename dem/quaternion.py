@@ -121,3 +121,19 @@ def from_axis_angle(axis, angle: float) -> np.ndarray:
     axis = np.asarray(axis, dtype=np.float64)
     axis = axis / np.linalg.norm(axis)
     return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis])
+
+
+def matrices(quat: np.ndarray) -> np.ndarray:
+    """Rotation matrices (n, 3, 3) of n quaternions (n, 4), scalar first (numpy, for drivers and
+    pictures: the same matrix as ``to_matrix``)."""
+    q = np.asarray(quat, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
+        ],
+        axis=1,
+    )

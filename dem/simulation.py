@@ -1,11 +1,15 @@
 """The engine's driver: a set of rigid clump bodies and walls advanced in time by the kernels.
 
-``Simulation`` owns the state arrays (``dem/bodies.py``), the wall geometry (``dem/walls.py``)
-and the neighbour lists, and runs ``dem.kernels.run_steps`` in chunks of simulated time. Between
+``Simulation`` owns the state (bodies and spheres, ``dem/bodies.py``; walls, ``dem/walls.py``;
+neighbour lists, ``dem/neighbours.py``; the run's clock and counters, ``dem/loop.py``), each in
+the container of the module that builds it, and runs ``dem.loop.run_steps`` in chunks of
+simulated time. Between
 chunks Python has control again: progress callbacks, a wall-clock deadline, cancellation and
 signals (a numba loop ignores them, so chunks are kept short). ``run`` may be called again and
 again, with bodies added or removed in between; physics blow-ups end a run with status
-``unstable`` and the time, never with an exception.
+``unstable`` and the time, never with an exception; an overlap beyond ``overlap_limit`` of a
+sphere radius while the step resolves the contact (the automatic step, or a smaller forced one)
+is not a blow-up but a material too soft for its impacts, and ends the run ``invalid``.
 
 Decisions a user should know:
 * the automatic step (``dem/timestep.py``) is recomputed when bodies or walls are added;
@@ -27,22 +31,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dem import kernels as K
+from dem import loop as L
+from dem import neighbours
 from dem.bodies import Bodies, Spheres
 from dem.clump import Clump
-from dem.contact import ContactParams
-from dem.motion import MOTION_ROW, evaluate, motion_row
+from dem.contact import ContactParams, wall_stiffness
+from dem.facets import closest_point_on_facet
+from dem.materials import Interaction, MaterialTable
+from dem.motion import evaluate
+from dem.polyhedra import Polyhedron
 from dem.quaternion import to_matrix
-from dem.result import SimulationStatus
+from dem.result import OVERLAP_LIMIT, SimulationStatus
 from dem.timestep import DEFAULT_FRACTION, automatic_time_step
-from dem.walls import FacetArrays, WallMesh
+from dem.walls import WallMesh, wall_arrays
 
 log = logging.getLogger(__name__)
 
 _UNSTABLE_REASONS = {
-    K.STATUS_UNSTABLE_NAN: "has a NaN or infinite state",
-    K.STATUS_UNSTABLE_SPEED: "moves faster than max_speed",
-    K.STATUS_UNSTABLE_OVERLAP: "overlaps beyond overlap_limit of a sphere radius",
+    L.STATUS_UNSTABLE_NAN: "has a NaN or infinite state",
+    L.STATUS_UNSTABLE_SPEED: "moves faster than max_speed",
+    L.STATUS_UNSTABLE_OVERLAP: "overlaps beyond overlap_limit of a sphere radius",
 }
 
 
@@ -72,7 +80,8 @@ def _vector(value, n: int, name: str) -> np.ndarray:
 
 
 class Simulation:
-    """Rigid multi-sphere bodies, walls, gravity and the contact law of ``params``."""
+    """Rigid bodies (sphere clumps, rounded polyhedra), walls, gravity and the contact law of
+    ``params``."""
 
     def __init__(
         self,
@@ -86,9 +95,14 @@ class Simulation:
         seed: int = 0,
         skin: float | None = None,
         max_speed: float = 100.0,
-        overlap_limit: float = 0.5,
+        overlap_limit: float = OVERLAP_LIMIT,
+        interactions: dict[tuple[str, str], Interaction] | None = None,
     ) -> None:
         self.params = params
+        # Every body's and wall's material; ``params`` is the default of both, ``interactions``
+        # give pairs of named materials their own e and mu (``dem/materials.py``).
+        self.materials = MaterialTable(interactions)
+        self._default_material = self.materials.index(params)
         self.gravity = _vector(gravity, 3, "gravity")
         self.domain_min = _vector(domain_min, 3, "domain_min")
         self.domain_max = _vector(domain_max, 3, "domain_max")
@@ -115,33 +129,38 @@ class Simulation:
         self._overlap_limit = overlap_limit
         self._clumps: list[Clump] = []
         self._stale = True
-        self._clk = np.zeros(2)
-        self._cnt = np.zeros(K.N_CNT, dtype=np.int64)
-        self._facets = FacetArrays.build([])
-        self._wall_arrays()
-        self._grow_lists(1024, 1024)
-        self._ev_body = np.zeros(16, dtype=np.int64)
-        self._ev_time = np.zeros(16)
+        self._run = L.new_run_state()
+        self._walls = wall_arrays([], self._material_index)
+        self._lists = neighbours.empty_neighbours()
+        self._settings: L.Settings | None = None
         self._events_seen = 0
+        self.max_overlap = 0.0  # largest overlap / radius seen at the end of a chunk (or a trip)
 
     # ---------------------------------------------------------------- set-up
 
     def add_body(
         self,
-        clump: Clump,
+        clump: Clump | Polyhedron,
         position,
         quaternion=(1.0, 0.0, 0.0, 0.0),
         velocity=(0.0, 0.0, 0.0),
         omega=(0.0, 0.0, 0.0),
+        material: ContactParams | None = None,
     ) -> int:
-        """Add a rigid body (its centre of mass at ``position``); returns its index."""
+        """Add a rigid body (its centre of mass at ``position``) of ``material`` (default: the
+        simulation's ``params``); returns its index."""
         position = _vector(position, 3, "position")
         q = _vector(quaternion, 4, "quaternion")
         if np.linalg.norm(q) == 0:
             raise SimulationError("quaternion must not be zero")
         q = q / np.linalg.norm(q)
-        inertia = _vector(clump.inertia, 3, "clump inertia")
-        if not clump.mass > 0 or np.any(inertia <= 0) or clump.n_spheres == 0 or np.any(clump.radius <= 0):
+        inertia = _vector(clump.inertia, 3, "body inertia")
+        if isinstance(clump, Polyhedron):
+            if not clump.mass > 0 or np.any(inertia <= 0) or clump.n_pieces == 0 or not clump.rounding > 0:
+                raise SimulationError(
+                    f"polyhedron {clump.name!r}: needs mass > 0, inertia > 0, a piece and rounding > 0"
+                )
+        elif not clump.mass > 0 or np.any(inertia <= 0) or clump.n_spheres == 0 or np.any(clump.radius <= 0):
             raise SimulationError(
                 f"clump {clump.name!r}: needs mass > 0, inertia > 0 and at least one sphere of radius > 0"
             )
@@ -164,20 +183,23 @@ class Simulation:
             inertia=inertia,
             diameter=clump.equivalent_diameter,
             active=True,
-            sphere_count=clump.n_spheres,
             clump_type=next(i for i, c in enumerate(self._clumps) if c is clump),
+            material=self._material_index(material),
         )
-        start = self.spheres.append(b, clump, position + np.asarray(clump.offset) @ rot.T)
-        self.bodies.raw("sphere_start")[b] = start
+        start = self.spheres.append(b, clump, rot, position)
+        self.bodies.sphere_start[b] = start
+        self.bodies.sphere_count[b] = self.spheres.n - start
         self._auto_dt = None
         self._stale = True
         return b
 
+    def _material_index(self, material: ContactParams | None) -> int:
+        return self._default_material if material is None else self.materials.index(material)
+
     def add_wall(self, wall: WallMesh) -> int:
         """Add a wall; returns its index."""
         self.walls.append(wall)
-        self._facets = FacetArrays.build(self.walls)
-        self._wall_arrays()
+        self._walls = wall_arrays(self.walls, self._material_index)
         self._auto_dt = None
         self._stale = True
         return len(self.walls) - 1
@@ -186,43 +208,47 @@ class Simulation:
         """Take body ``i`` out of the simulation (it keeps its index and last state)."""
         if not 0 <= i < self.bodies.n:
             raise SimulationError(f"no body {i}; there are {self.bodies.n}")
-        self.bodies.raw("active")[i] = False
+        self.bodies.active[i] = False
         self._stale = True
 
     # ---------------------------------------------------------------- state
 
     @property
     def t(self) -> float:
-        return float(self._clk[K.K_T])
+        return float(self._run.clock[L.K_T])
 
     @property
     def cost(self) -> float:
-        return float(self._clk[K.K_COST])
+        return float(self._run.clock[L.K_COST])
 
     @property
     def dt(self) -> float:
         if self._forced_dt is not None:
             return self._forced_dt
         if self._auto_dt is None:
-            materials = [w.material or self.params for w in self.walls]
-            self._auto_dt = automatic_time_step(self._clumps, self.params, materials, self.dt_fraction)
+            table = self.materials.materials
+            walls = [table[k] for k in self._walls.material]
+            stiffest = max(
+                (table[k] for k in set(self.bodies.material.tolist())), key=lambda m: m.E, default=self.params
+            )
+            self._auto_dt = automatic_time_step(self._clumps, stiffest, walls, self.dt_fraction)
         return self._auto_dt
 
     @property
     def n_contacts(self) -> int:
         """Sphere contacts (sphere-sphere and sphere-facet) that carried force at the last step."""
-        return int(self._cnt[K.C_CONTACTS])
+        return int(self._run.counters[L.C_CONTACTS])
 
     @property
     def n_builds(self) -> int:
         """How often the neighbour lists were rebuilt."""
-        return int(self._cnt[K.C_BUILDS])
+        return int(self._run.counters[L.C_BUILDS])
 
     def wall_displacement(self, k: int, t: float | None = None) -> np.ndarray:
-        return evaluate(self._motion_rows[k], self.t if t is None else t)[0]
+        return evaluate(self._walls.motion[k], self.t if t is None else t)[0]
 
     def wall_velocity(self, k: int, t: float | None = None) -> np.ndarray:
-        return evaluate(self._motion_rows[k], self.t if t is None else t)[1]
+        return evaluate(self._walls.motion[k], self.t if t is None else t)[1]
 
     def wall_vertices(self, k: int, t: float | None = None) -> np.ndarray:
         """Vertices of wall k at time t (now by default)."""
@@ -266,7 +292,7 @@ class Simulation:
             raise SimulationError(f"chunk_time must be > 0 s, got {chunk_time!r}")
         start_steps = self.steps
         if self.bodies.n == 0:
-            self._clk[K.K_T] = max(self.t, until)
+            self._run.clock[L.K_T] = max(self.t, until)
             return RunStatus(SimulationStatus.OK, "no bodies", self.t, 0)
         dt = self.dt
         # Ceil, not round: a stop less than half a step ahead must still be reached, or a caller
@@ -291,216 +317,172 @@ class Simulation:
             n = min(chunk_steps, remaining)
             status, done = self._advance(n, dt)
             remaining -= done
-            if status != K.STATUS_OK:
-                body = int(self._cnt[K.C_BAD_BODY])
-                message = (
-                    f"unstable at t={self.t:.6g} s: body {body} {_UNSTABLE_REASONS[status]} "
-                    f"(dt={dt:.3g} s); use a smaller dt or dt_fraction"
-                )
-                log.warning(message)
-                return RunStatus(SimulationStatus.UNSTABLE, message, self.t, self.steps - start_steps)
+            if status != L.STATUS_OK:
+                report = self._failure(status, dt, self.steps - start_steps)
+                log.warning(report.message)
+                return report
+            self._watch_overlap()
             if on_chunk is not None:
                 on_chunk(self)
         return RunStatus(SimulationStatus.OK, "", self.t, self.steps - start_steps)
 
+    # ---------------------------------------------------------------- validity
+
+    def resolves_contacts(self) -> bool:
+        """Whether the step is at most the automatic one, i.e. integrates every contact well.
+
+        Then an overlap beyond the limit is physical (too soft for the impact), not numerical.
+        """
+        if self._forced_dt is None:
+            return True
+        materials = [w.material or self.params for w in self.walls]
+        automatic = automatic_time_step(self._clumps, self.params, materials, DEFAULT_FRACTION)
+        return self._forced_dt <= automatic * (1 + 1e-9)
+
+    def current_overlap(self) -> float:
+        """Largest overlap of the last step's contacts, as a fraction of the smaller radius."""
+        worst = 0.0
+        radius = self.spheres.radius
+        pairs, wall_pairs = self._lists.pairs, self._lists.wall_pairs
+        n_pp, n_wp = int(pairs.count[neighbours.N_PAIRS]), int(wall_pairs.count[neighbours.N_PAIRS])
+        if n_pp:
+            delta = pairs.delta[:n_pp]
+            touching = delta > 0
+            if np.any(touching):
+                i, j = pairs.i[:n_pp][touching], pairs.j[:n_pp][touching]
+                worst = max(worst, float(np.max(delta[touching] / np.minimum(radius[i], radius[j]))))
+        if n_wp:
+            delta = wall_pairs.delta[:n_wp]
+            touching = delta > 0
+            if np.any(touching):
+                worst = max(worst, float(np.max(delta[touching] / radius[wall_pairs.i[:n_wp][touching]])))
+        return worst
+
+    def _watch_overlap(self) -> None:
+        self.max_overlap = max(self.max_overlap, self.current_overlap())
+
+    def _body_overlap(self, body: int) -> float:
+        """The deepest overlap of ``body``'s spheres with other bodies' spheres and the walls,
+        as a fraction of the smaller radius, measured at the current state."""
+        s = self.spheres
+        x, radius, owner = self.sphere_positions(), s.radius, s.body
+        mine = np.flatnonzero(owner == body)
+        others = np.flatnonzero((owner != body) & self.bodies.active[owner])
+        worst = 0.0
+        if len(mine) and len(others):
+            gap = np.linalg.norm(x[mine, None, :] - x[None, others, :], axis=2)
+            reach = radius[mine, None] + radius[None, others]
+            ratio = (reach - gap) / np.minimum(radius[mine, None], radius[None, others])
+            worst = max(worst, float(ratio.max()))
+        facets = self._walls.facets
+        for k in mine:
+            for facet in range(len(facets.wall)):
+                disp = self._walls.disp[facets.wall[facet]]
+                d2, *_ = closest_point_on_facet(x[k, 0], x[k, 1], x[k, 2], facets, facet, *disp)
+                worst = max(worst, (radius[k] - math.sqrt(d2)) / radius[k])
+        return max(worst, 0.0)
+
+    def _failure(self, status: int, dt: float, steps: int) -> RunStatus:
+        """What a kernel's bad status means: physics beyond the contact model, or numerics."""
+        body = int(self._run.counters[L.C_BAD_BODY])
+        where = f"at t={self.t:.6g} s: body {body}"
+        if status == L.STATUS_UNSTABLE_OVERLAP and self.resolves_contacts():
+            # The kernel stops at the first step past the limit, so the overlap measured now is
+            # just above it. How far the impact would have gone is the measure of invalidity:
+            # an undamped linear spring at overlap d0 closing at speed v reaches
+            # sqrt(d0^2 + m v^2 / K), and the E that keeps it at the limit scales as its square.
+            overlap = self._body_overlap(body)
+            speed = float(np.linalg.norm(self.bodies.vel[body]))
+            r = float(self.spheres.radius[self.spheres.body == body].min())
+            stiffness = wall_stiffness(self.params.E, float(self.bodies.diameter[body]), self.params.E)
+            heading = math.sqrt(overlap**2 + float(self.bodies.mass[body]) * speed**2 / (stiffness * r * r))
+            self.max_overlap = max(self.max_overlap, heading)
+            needed = self.params.E * (heading / self._overlap_limit) ** 2
+            message = (
+                f"invalid {where} overlapped {overlap:.2f} of a sphere radius (limit "
+                f"{self._overlap_limit:g}) closing at {speed:.2g} m/s, heading for {heading:.2f}, with "
+                f"a step that resolves the contact (dt={dt:.3g} s): E = {self.params.E:.3g} Pa is too "
+                f"soft for this impact (about {needed:.2g} Pa would keep it within the limit); the "
+                "parameters are outside the linear contact model's range of validity"
+            )
+            return RunStatus(SimulationStatus.INVALID, message, self.t, steps)
+        if self._forced_dt is not None and not self.resolves_contacts():
+            advice = "the forced dt exceeds the automatic step; remove it or make it smaller"
+        elif status == L.STATUS_UNSTABLE_SPEED:
+            advice = f"lower dt_fraction, or raise max_speed ({self._max_speed:g} m/s) if speeds are real"
+        else:
+            advice = "lower dt_fraction"
+        message = f"unstable {where} {_UNSTABLE_REASONS[status]} (dt={dt:.3g} s); {advice}"
+        return RunStatus(SimulationStatus.UNSTABLE, message, self.t, steps)
+
     def _advance(self, n: int, dt: float) -> tuple[int, int]:
         """Run n steps through the kernel, growing lists as needed; returns (status, steps done)."""
         self._prepare()
+        counters = self._run.counters
         done = 0
         resume = False
         while True:
             need_forces = self._stale and not resume
-            status = self._call_kernel(n - done, need_forces, resume, dt)
-            done += int(self._cnt[K.C_STEPS])
-            self.steps += int(self._cnt[K.C_STEPS])
+            status = L.run_steps(
+                n - done,
+                dt,
+                need_forces,
+                resume,
+                self._run,
+                self._settings,
+                self.bodies.arrays(),
+                self.spheres.arrays(),
+                self._walls,
+                self._lists,
+            )
+            done += int(counters[L.C_STEPS])
+            self.steps += int(counters[L.C_STEPS])
             self._collect_events()
-            if status == K.STATUS_CAPACITY:
-                resume = bool(self._cnt[K.C_MIDSTEP])
-                self._grow_lists(int(self._cnt[K.C_NEED_PP]), int(self._cnt[K.C_NEED_WP]))
+            if status == L.STATUS_CAPACITY:
+                resume = bool(counters[L.C_MIDSTEP])
+                self._lists = neighbours.grown(self._lists)
                 continue
-            if need_forces and status == K.STATUS_OK:
+            if need_forces and status == L.STATUS_OK:
                 self._stale = False
-            if status != K.STATUS_OK or done >= n:
+            if status != L.STATUS_OK or done >= n:
                 return status, done
 
-    def _call_kernel(self, n: int, need_forces: bool, resume: bool, dt: float) -> int:
-        b, s, f = self.bodies, self.spheres, self._facets
-        return K.run_steps(
-            n,
-            need_forces,
-            resume,
-            dt,
-            self._clk,
-            self._cnt,
-            self._par,
-            self._dims,
-            s.n,
-            b.n,
-            b.raw("pos"),
-            b.raw("vel"),
-            b.raw("quat"),
-            b.raw("angmom"),
-            b.raw("omega"),
-            b.raw("rot"),
-            b.raw("force"),
-            b.raw("torque"),
-            b.raw("mass"),
-            b.raw("inertia"),
-            b.raw("diameter"),
-            b.raw("active"),
-            s._x,
-            self._x_build,
-            s._radius,
-            s._offset,
-            s._body,
-            self._motion_rows,
-            self._wall_disp,
-            self._wall_vel,
-            self._wall_mat,
-            f.tri,
-            f.facet_tri_start,
-            f.facet_tri_count,
-            f.facet_wall,
-            f.facet_lo,
-            f.facet_hi,
-            f.facet_normal,
-            f.facet_offset,
-            self._cell_start,
-            self._cell_items,
-            self._sphere_cell,
-            self._tmp,
-            self._lb,
-            self._pp_i,
-            self._pp_j,
-            self._pp_hist,
-            self._pp_group,
-            self._pp_delta,
-            self._pp_n,
-            self._grp_sum,
-            self._grp_law,
-            self._new_i,
-            self._new_j,
-            self._new_hist,
-            self._wp_i,
-            self._wp_f,
-            self._wp_hist,
-            self._wp_delta,
-            self._wp_n,
-            self._wp_cp,
-            self._wp_keep,
-            self._facet_sum,
-            self._new_wi,
-            self._new_wf,
-            self._new_whist,
-            self._ev_body,
-            self._ev_time,
-        )
-
     def _collect_events(self) -> None:
-        for k in range(self._events_seen, int(self._cnt[K.C_EVENTS])):
-            body, t = int(self._ev_body[k]), float(self._ev_time[k])
+        run = self._run
+        for k in range(self._events_seen, int(run.counters[L.C_EVENTS])):
+            body, t = int(run.left_body[k]), float(run.left_time[k])
             self.removed_out_of_domain.append((body, t))
             self._stale = True
             log.debug("body %d left the domain at t=%.6g s", body, t)
-        self._events_seen = int(self._cnt[K.C_EVENTS])
+        self._events_seen = int(run.counters[L.C_EVENTS])
 
-    # ---------------------------------------------------------------- arrays
+    # ---------------------------------------------------------------- kernel state
 
     def _prepare(self) -> None:
-        """Size the per-sphere scratch arrays, the cell grid and the parameter vector."""
+        """Size the lists' per-sphere state and the event list, and settle the run's settings."""
         ns = self.spheres.n
-        if not hasattr(self, "_x_build") or len(self._x_build) != len(self.spheres._x):
-            old = getattr(self, "_x_build", np.zeros((0, 3)))
-            self._x_build = np.zeros_like(self.spheres._x)
-            self._x_build[: len(old)] = old
+        grid = neighbours.sized_grid(self._lists.grid, ns)
+        if grid is not self._lists.grid:
+            self._lists = self._lists._replace(grid=grid)
             self._stale = True
-        if len(self._ev_body) < len(self.bodies.raw("pos")):
-            for name in ("_ev_body", "_ev_time"):
-                old = getattr(self, name)
-                new = np.zeros(len(self.bodies.raw("pos")), dtype=old.dtype)
-                new[: len(old)] = old
-                setattr(self, name, new)
+        self._run = L.with_event_room(self._run, self.bodies.n)
         radius = self.spheres.radius
         active_r = radius[self.bodies.active[self.spheres.body]] if ns else radius
         r_max = float(active_r.max()) if len(active_r) else float(radius.max())
         skin = self._skin if self._skin is not None else 1.0 * float(np.mean(radius))
-        # The kernel grids the spheres' bounding box with cells of at least this size, using
-        # at most this many cells (a few per sphere keeps the empty-cell overhead small).
-        n_cells = max(8 * ns, 1024)
-        if not hasattr(self, "_cell_start") or len(self._cell_start) != n_cells + 1:
-            self._cell_start = np.zeros(n_cells + 1, dtype=np.int64)
-            self._dims = np.ones(3, dtype=np.int64)
-        if not hasattr(self, "_tmp") or len(self._tmp) != ns:
-            self._cell_items = np.zeros(ns, dtype=np.int64)
-            self._sphere_cell = np.zeros(ns, dtype=np.int64)
-            self._tmp = np.zeros(ns, dtype=np.int64)
-            self._lb = np.zeros(3)
-        p = self.params
-        old_par = getattr(self, "_par", None)
-        self._par = np.zeros(K.N_PAR)
-        self._par[[K.P_E, K.P_ZETA, K.P_MU, K.P_KT]] = p.E, p.damping_ratio, p.mu, p.tangential_ratio
-        self._par[K.P_SKIN] = skin
-        self._par[K.P_OVERLAP] = self._overlap_limit
-        self._par[K.P_VMAX] = self._max_speed
-        self._par[K.P_GX : K.P_GX + 3] = self.gravity
-        self._par[K.P_LO : K.P_LO + 3] = self.domain_min
-        self._par[K.P_HI : K.P_HI + 3] = self.domain_max
-        self._par[K.P_CELL_MIN] = 2.0 * r_max + skin
-        law = [K.P_E, K.P_ZETA, K.P_KT]
-        if old_par is not None and not np.array_equal(old_par[law], self._par[law]):
+        old = self._settings
+        self._settings = L.Settings(
+            material=self.materials.arrays(),
+            gravity=self.gravity,
+            domain_lo=self.domain_min,
+            domain_hi=self.domain_max,
+            skin=float(skin),
+            cell_min=float(2.0 * r_max + skin),
+            overlap_limit=float(self._overlap_limit),
+            max_speed=float(self._max_speed),
+        )
+        if old is not None and not (
+            np.array_equal(old.material.E, self._settings.material.E)
+            and np.array_equal(old.material.law, self._settings.material.law)
+        ):
             self._stale = True  # the body pairs' law constants are computed at list builds
-
-    def _wall_arrays(self) -> None:
-        n = len(self.walls)
-        self._motion_rows = np.zeros((n, MOTION_ROW))
-        self._wall_mat = np.zeros((n, 4))
-        for k, wall in enumerate(self.walls):
-            m = wall.material or self.params
-            self._motion_rows[k] = motion_row(wall.motion)
-            self._wall_mat[k] = m.E, m.damping_ratio, m.mu, m.tangential_ratio
-        self._wall_disp = np.zeros((n, 3))
-        self._wall_vel = np.zeros((n, 3))
-        self._facet_sum = np.zeros(max(len(self._facets.facet_wall), 1))
-
-    def _grow_lists(self, need_pp: int, need_wp: int) -> None:
-        """(Re)allocate the neighbour lists with room to spare, keeping the current entries."""
-        cap_pp = max(1024, 2 * need_pp, len(getattr(self, "_pp_i", ())))
-        cap_wp = max(1024, 2 * need_wp, len(getattr(self, "_wp_i", ())))
-        n_pp, n_wp = int(self._cnt[K.C_PP]), int(self._cnt[K.C_WP])
-
-        def grown(name, shape, dtype, keep):
-            new = np.zeros(shape, dtype=dtype)
-            if keep and hasattr(self, name):
-                old = getattr(self, name)
-                new[:keep] = old[:keep]
-            setattr(self, name, new)
-
-        if not hasattr(self, "_pp_i") or cap_pp > len(self._pp_i):
-            grown("_pp_i", cap_pp, np.int64, n_pp)
-            grown("_pp_j", cap_pp, np.int64, n_pp)
-            grown("_pp_hist", (cap_pp, 3), np.float64, n_pp)
-            grown("_pp_group", cap_pp, np.int64, n_pp)
-            for name, shape in (
-                ("_pp_delta", cap_pp),
-                ("_pp_n", (cap_pp, 3)),
-                ("_grp_sum", cap_pp),
-                ("_grp_law", (cap_pp, 4)),
-                ("_new_hist", (cap_pp, 3)),
-            ):
-                grown(name, shape, np.float64, 0)
-            grown("_new_i", cap_pp, np.int64, 0)
-            grown("_new_j", cap_pp, np.int64, 0)
-        if not hasattr(self, "_wp_i") or cap_wp > len(self._wp_i):
-            grown("_wp_i", cap_wp, np.int64, n_wp)
-            grown("_wp_f", cap_wp, np.int64, n_wp)
-            grown("_wp_hist", (cap_wp, 3), np.float64, n_wp)
-            for name, shape in (
-                ("_wp_delta", cap_wp),
-                ("_wp_n", (cap_wp, 3)),
-                ("_wp_cp", (cap_wp, 3)),
-                ("_new_whist", (cap_wp, 3)),
-            ):
-                grown(name, shape, np.float64, 0)
-            grown("_wp_keep", cap_wp, np.bool_, 0)
-            grown("_new_wi", cap_wp, np.int64, 0)
-            grown("_new_wf", cap_wp, np.int64, 0)

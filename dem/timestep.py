@@ -7,7 +7,9 @@ lengthens it), with ``K`` from ``dem.contact`` and ``m*`` the series of the part
 ways, ``1/m_eff = 1/m + (c x n)^T I^-1 (c x n)`` (the contact point's own radius drops out of
 ``c x n`` because it lies along n), so a thin plate hit at a corner is several times lighter
 than its mass: that is the rotational mode of thin bodies. We take the worst n for every sphere
-centre c: ``|c|^2 lambda_max(I^-1 projected on the plane normal to c)``.
+centre c: ``|c|^2 lambda_max(I^-1 projected on the plane normal to c)``. For a rounded
+polyhedron the points c are its core's vertices (``lever_points``): a contact acts at a core
+vertex plus r along n, and the r n part drops out of ``c x n`` as well.
 
 Several spheres of one body touching the same partner do not stiffen the contact: the contact
 law shares the body pair's stiffness among them (``dem/contact.py``), so a flat face landing on
@@ -26,6 +28,7 @@ import numpy as np
 
 from dem.clump import Clump
 from dem.contact import ContactParams, normal_stiffness, series, wall_stiffness
+from dem.polyhedra import Polyhedron
 
 DEFAULT_FRACTION = 1.0 / 20.0
 
@@ -34,11 +37,17 @@ class TimeStepError(ValueError):
     """No time step can be derived (no bodies) or the requested fraction is unusable."""
 
 
-def effective_mass(clump: Clump) -> float:
-    """Smallest effective mass of the clump at any of its sphere contacts (kg)."""
+def lever_points(shape: Clump | Polyhedron) -> np.ndarray:
+    """Body-frame points whose lever arms bound those of any contact: sphere centres of a clump,
+    core vertices of a rounded polyhedron."""
+    return np.asarray(shape.core if isinstance(shape, Polyhedron) else shape.offset, dtype=np.float64)
+
+
+def effective_mass(clump: Clump | Polyhedron) -> float:
+    """Smallest effective mass of the body at any of its contacts (kg)."""
     inv_inertia = np.diag(1.0 / np.asarray(clump.inertia, dtype=np.float64))
     worst = 0.0
-    for c in np.asarray(clump.offset, dtype=np.float64):
+    for c in lever_points(clump):
         length = float(np.linalg.norm(c))
         if length == 0.0:
             continue

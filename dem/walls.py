@@ -6,20 +6,23 @@ closest point, so a sphere rolling over the shared edge of two coplanar triangle
 continuous force, never two. Between non-coplanar facets of the same wall the rule is: an
 edge or vertex contact is dropped when its contact point also lies on another facet that the
 sphere touches at least as closely (a convex edge is then felt once, a concave corner keeps both
-face contacts); see ``dem/kernels.py``. Walls are two-sided.
+face contacts); see ``dem/forces.py``. Walls are two-sided.
 
-This module builds the geometry arrays; it must not compute forces.
+This module checks and groups the meshes and gives the kernels their rows (``Walls``; the facets'
+arrays and distance queries are in ``dem/facets.py``); it must not compute forces.
 """
 
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from dem.contact import ContactParams
-from dem.motion import Motion
+from dem.facets import Facets, build_facets
+from dem.motion import MOTION_ROW, Motion, motion_row
 
 log = logging.getLogger(__name__)
 
@@ -149,57 +152,25 @@ def _group_planar_facets(vertices: np.ndarray, faces: np.ndarray) -> list[np.nda
     return [np.array(g, dtype=np.int64) for _, g in sorted(groups.items())]
 
 
-@dataclass
-class FacetArrays:
-    """Every wall's facets flattened for the kernels (reference positions, before motion)."""
+class Walls(NamedTuple):
+    """The walls as the kernels see them: one row per wall, plus their facets."""
 
-    tri: np.ndarray  # (n_tri, 3, 3) triangle corners, grouped by facet
-    facet_tri_start: np.ndarray  # (n_facets,)
-    facet_tri_count: np.ndarray  # (n_facets,)
-    facet_wall: np.ndarray  # (n_facets,) index of the owning wall
-    facet_lo: np.ndarray  # (n_facets, 3) bounding box at the reference position
-    facet_hi: np.ndarray  # (n_facets, 3)
-    # The facet's plane, n . x = offset (unit normal, reference position): the kernels reject a
-    # sphere whose plane distance exceeds its reach before any closest-point test.
-    facet_normal: np.ndarray  # (n_facets, 3)
-    facet_offset: np.ndarray  # (n_facets,)
+    motion: np.ndarray  # (n, MOTION_ROW) prescribed motion (``dem/motion.py``)
+    disp: np.ndarray  # (n, 3) displacement at the current time, written by the run loop
+    vel: np.ndarray  # (n, 3) velocity at the current time, written by the run loop
+    material: np.ndarray  # (n,) int64 index into the simulation's MaterialTable
+    facets: Facets
+    facet_sum: np.ndarray  # (n_facets,) scratch of the force pass: one body's overlap sum per facet
 
-    @classmethod
-    def build(cls, walls: list[WallMesh]) -> FacetArrays:
-        tris, starts, counts, owners, los, his, normals, offsets = [], [], [], [], [], [], [], []
-        n_tri = 0
-        for w, wall in enumerate(walls):
-            for facet in wall.facets:
-                corners = wall.vertices[wall.faces[facet]]
-                tris.append(corners)
-                starts.append(n_tri)
-                counts.append(len(facet))
-                owners.append(w)
-                los.append(corners.reshape(-1, 3).min(axis=0))
-                his.append(corners.reshape(-1, 3).max(axis=0))
-                normal = np.cross(corners[0, 1] - corners[0, 0], corners[0, 2] - corners[0, 0])
-                normal /= np.linalg.norm(normal)
-                normals.append(normal)
-                offsets.append(float(normal @ corners[0, 0]))
-                n_tri += len(facet)
-        if not tris:
-            return cls(
-                np.zeros((0, 3, 3)),
-                np.zeros(0, np.int64),
-                np.zeros(0, np.int64),
-                np.zeros(0, np.int64),
-                np.zeros((0, 3)),
-                np.zeros((0, 3)),
-                np.zeros((0, 3)),
-                np.zeros(0),
-            )
-        return cls(
-            np.ascontiguousarray(np.concatenate(tris)),
-            np.array(starts, dtype=np.int64),
-            np.array(counts, dtype=np.int64),
-            np.array(owners, dtype=np.int64),
-            np.array(los),
-            np.array(his),
-            np.array(normals),
-            np.array(offsets),
-        )
+
+def wall_arrays(walls: list[WallMesh], material_index) -> Walls:
+    """The kernels' view of ``walls``; ``material_index(wall.material)`` numbers each wall's
+    material (None: the particles' default)."""
+    n = len(walls)
+    motion = np.zeros((n, MOTION_ROW))
+    material = np.zeros(n, dtype=np.int64)
+    for k, wall in enumerate(walls):
+        motion[k] = motion_row(wall.motion)
+        material[k] = material_index(wall.material)
+    facets = build_facets(walls)
+    return Walls(motion, np.zeros((n, 3)), np.zeros((n, 3)), material, facets, np.zeros(max(facets.n, 1)))

@@ -1,8 +1,11 @@
 """The driver: advances a study through an Executor (runs trials) and a Store (keeps the truth).
 
 One study is a sequence of *batches*: batch 0 is the initial population, batch k (1..G) the
-offspring of generation k, and, when ``elite_reevaluation > 0``, batch G + 1 re-simulates every
-matching parameter set with fresh seeds. ``StudyRecord.generation`` counts completed batches.
+offspring of generation k together with the extra replicates earlier sets earned
+(``optimizer/replicates.py``), batch G + 1 the last extra replicates, batch G + 2 the validation
+of the fastest matching sets on fresh seeds (``optimizer/validation.py``); an empty batch
+completes at once. ``StudyRecord.generation`` counts completed batches. The search gets
+objectives and constraints (``optimizer/ga.py``): the match first, invalid runs as violations.
 
     load study -> (paused/cancelled: withdraw its work; done: nothing)
     current batch: GA state from the store (or a new search) -> ask -> store trials as pending
@@ -39,9 +42,11 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import ValidationError
 
+from dem.result import SimulationStatus
+from optimizer import validation
 from optimizer.ga import Search, create_search, from_bytes, to_bytes
-from optimizer.objectives import Evaluation, evaluate
-from optimizer.pareto import Ranking, rank, recommendation_json
+from optimizer.objectives import Evaluation, evaluate, match_rule, observation
+from optimizer.pareto import Ranking, rank, recommendation_json, summary
 from optimizer.protocols import (
     Executor,
     Store,
@@ -52,19 +57,16 @@ from optimizer.protocols import (
     TrialState,
     trial_id,
 )
+from optimizer.replicates import allocate
+from optimizer.seeds import trial_seed, validation_seeds
 from optimizer.space import ParameterSpace
-from optimizer.study import StudyDefinition, describe_validation_error
+from optimizer.study import VALIDATION_REPLICATE_BASE, StudyDefinition, describe_validation_error
+from optimizer.validation import NOT_VALIDATED
 
 logger = logging.getLogger(__name__)
 
 ACTIVE = (StudyStatus.CREATED, StudyStatus.RUNNING)
 IN_FLIGHT = (TrialState.QUEUED, TrialState.RUNNING)
-
-
-def trial_seed(study_seed: int, individual: int, replicate: int) -> int:
-    """A simulation's seed: distinct per individual and replicate, reproducible from the study seed."""
-    state = np.random.SeedSequence([study_seed, individual, replicate]).generate_state(1)[0]
-    return int(state) & 0x7FFFFFFF
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ class _Study:
 
     @property
     def last_batch(self) -> int:
-        return self.definition.ga.generations + (1 if self.definition.elite_reevaluation else 0)
+        return self.definition.validation_batch()
 
 
 class Driver:
@@ -180,15 +182,20 @@ class Driver:
         cached = self._batches.get(study.study_id)
         if cached is not None and cached.index == study.generation:
             return cached
-        if study.generation <= context.definition.ga.generations:
+        definition = context.definition
+        if study.generation <= definition.ga.generations:
             batch = self._ga_batch(study, context, records)
+        elif study.generation == definition.replicate_batch():
+            batch = _Batch(study.generation, self._extra_replicates(study, context, records), [], None, None)
         else:
-            batch = self._reevaluation_batch(study, context, records)
+            batch = self._validation_batch(study, context, records)
         self.store.add_trials(batch.specs)
         self._batches[study.study_id] = batch
         return batch
 
-    def _spec(self, study_id: str, context: _Study, individual: int, batch: int, replicate: int, params):
+    def _spec(
+        self, study_id: str, context: _Study, individual: int, batch: int, replicate: int, params, seed=None
+    ):
         definition = context.definition
         return TrialSpec(
             trial_id=trial_id(study_id, individual, replicate),
@@ -196,23 +203,32 @@ class Driver:
             individual=individual,
             generation=batch,
             replicate=replicate,
-            seed=trial_seed(definition.seed, individual, replicate),
+            seed=trial_seed(definition.seed, replicate) if seed is None else seed,
             params=dict(params),
             scenario=definition.scenario,
             timeout_s=definition.trial_timeout_s,
             keep_snapshots=definition.keep_snapshots,
+            engine=definition.engine,
+            engine_options=dict(definition.engine_options) or None,
         )
 
     def _ga_batch(self, study: StudyRecord, context: _Study, records: list[TrialRecord]) -> _Batch:
+        """The GA's next individuals, plus the extra replicates earned by earlier sets."""
         definition, index = context.definition, study.generation
         if study.ga_state is None:
-            search = create_search(definition.ga, context.space.n_genes, definition.seed)
+            search = create_search(
+                definition.ga,
+                context.space.n_genes,
+                definition.seed,
+                match_rule(definition, context.n_items),
+            )
         else:
             search = from_bytes(study.ga_state)
         genes = search.ask()
+        born = _first_batches(records)
         stored: dict[int, dict[str, float]] = {}
         for record in records:
-            if record.spec.generation == index:
+            if record.spec.generation == index and born[record.spec.individual] == index:
                 stored.setdefault(record.spec.individual, record.spec.params)
         if stored:
             # What was simulated is the truth; the re-ask only restores the search's internal state.
@@ -226,57 +242,132 @@ class Driver:
                     len(genes),
                 )
             genes = np.array([context.space.genes(stored[individual]) for individual in individuals])
+            extra = [
+                record.spec
+                for record in records
+                if record.spec.generation == index and born[record.spec.individual] < index
+            ]
         else:
             first = 1 + max((record.spec.individual for record in records), default=-1)
             individuals = list(range(first, first + len(genes)))
+            extra = self._extra_replicates(study, context, records)
         specs = [
             self._spec(study.study_id, context, individual, index, replicate, context.space.params(gene))
             for individual, gene in zip(individuals, genes, strict=True)
             for replicate in range(definition.replicates)
         ]
-        logger.info("study %s: batch %d with %d individuals", study.study_id, index, len(individuals))
-        return _Batch(index, specs, individuals, genes, search)
+        logger.info(
+            "study %s: batch %d with %d individuals and %d extra replicates",
+            study.study_id,
+            index,
+            len(individuals),
+            len(extra),
+        )
+        return _Batch(index, specs + extra, individuals, genes, search)
 
-    def _reevaluation_batch(self, study: StudyRecord, context: _Study, records: list[TrialRecord]) -> _Batch:
+    def _extra_replicates(
+        self, study: StudyRecord, context: _Study, records: list[TrialRecord]
+    ) -> list[TrialSpec]:
+        """Trials of the replicates earned by promising sets (``optimizer/replicates.py``)."""
+        definition, index = context.definition, study.generation
+        stored = [record.spec for record in records if record.spec.generation == index]
+        born = _first_batches(records)
+        if stored and index == definition.replicate_batch():
+            return stored
+        spent = sum(
+            record.spec.replicate >= definition.replicates
+            and record.spec.generation < definition.validation_batch()
+            for record in records
+        )
+        evaluations = {ev.individual: ev for ev in evaluate(records, definition, context.n_items)}
+        earned = allocate(list(evaluations.values()), definition, spent, index)
+        return [
+            self._spec(study.study_id, context, individual, index, replicate, evaluations[individual].params)
+            for individual, replicates in earned.items()
+            if born.get(individual, index) < index
+            for replicate in replicates
+        ]
+
+    def _validation_batch(self, study: StudyRecord, context: _Study, records: list[TrialRecord]) -> _Batch:
+        """The candidates re-simulated on fresh seeds (``optimizer/validation.py``)."""
         definition, index = context.definition, study.generation
         stored = [record.spec for record in records if record.spec.generation == index]
         if stored:
             return _Batch(index, stored, sorted({spec.individual for spec in stored}), None, None)
-        ga_records = [record for record in records if record.spec.generation < index]
-        matching = [
-            evaluation
-            for evaluation in evaluate(ga_records, definition, context.n_items)
-            if evaluation.matches(definition.experiment.tolerance)
-        ]
-        first = definition.replicates
+        checked = validation.candidates(self._ranked_matches(context, records), definition)
+        seeds = validation_seeds(definition.seed, definition.validation.seeds, definition.max_replicates)
         specs = [
-            self._spec(study.study_id, context, evaluation.individual, index, replicate, evaluation.params)
-            for evaluation in matching
-            for replicate in range(first, first + definition.elite_reevaluation)
+            self._spec(
+                study.study_id,
+                context,
+                evaluation.individual,
+                index,
+                VALIDATION_REPLICATE_BASE + k,
+                evaluation.params,
+                seed=seed,
+            )  # fmt: skip
+            for evaluation in checked
+            for k, seed in enumerate(seeds)
         ]
-        logger.info("study %s: re-evaluating %d matching sets", study.study_id, len(matching))
-        return _Batch(index, specs, [evaluation.individual for evaluation in matching], None, None)
+        logger.info(
+            "study %s: validating %d sets on %d fresh seeds", study.study_id, len(checked), len(seeds)
+        )
+        return _Batch(index, specs, [evaluation.individual for evaluation in checked], None, None)
+
+    def _ranking(self, context: _Study, records: list[TrialRecord]) -> Ranking:
+        definition = context.definition
+        return rank(
+            evaluate(records, definition, context.n_items),
+            definition.match_tolerance(),
+            context.space,
+            min_replicates=definition.max_replicates,
+        )
+
+    def _ranked_matches(self, context: _Study, records: list[TrialRecord]) -> list[Evaluation]:
+        ranking = self._ranking(context, records)
+        if ranking.recommendation is None:
+            return []
+        return [ranking.recommendation, *ranking.equivalent]
 
     def _complete(
         self, study: StudyRecord, context: _Study, batch: _Batch, records: list[TrialRecord]
     ) -> None:
         definition = context.definition
         evaluations = evaluate(records, definition, context.n_items)
+        by_individual = {evaluation.individual: evaluation for evaluation in evaluations}
         ga_state = study.ga_state
         if batch.search is not None:
-            by_individual = {evaluation.individual: evaluation for evaluation in evaluations}
-            objectives = np.array(
-                [[by_individual[i].f1, by_individual[i].f2] for i in batch.individuals], dtype=float
+            told = [by_individual[i] for i in batch.individuals]
+            batch.search.tell(
+                batch.genes, *_objectives_and_constraints(told), observations=[observation(ev) for ev in told]
             )
-            batch.search.tell(batch.genes, objectives)
+            revised = sorted(
+                {spec.individual for spec in batch.specs} - set(batch.individuals) & set(by_individual)
+            )
+            if revised:
+                again = [by_individual[i] for i in revised]
+                genes = np.array([context.space.genes(ev.params) for ev in again])
+                batch.search.revise(
+                    genes, *_objectives_and_constraints(again), observations=[observation(ev) for ev in again]
+                )
             ga_state = to_bytes(batch.search)
-        ranking = rank(evaluations, definition.experiment.tolerance, context.space)
+        ranking = rank(
+            evaluations,
+            definition.match_tolerance(),
+            context.space,
+            min_replicates=definition.max_replicates,
+        )
         recommendation = recommendation_json(
             ranking,
             definition.experiment.target(),
-            definition.experiment.tolerance,
+            definition.match_tolerance(),
             definition.objective_time,
         )
+        verdict = _verdict(ranking)
+        if batch.index == definition.validation_batch():
+            recommendation, verdict = _validated(ranking, records, definition)
+        elif recommendation is not None:
+            recommendation["validation_status"] = NOT_VALIDATED
         pareto_ids = [tid for evaluation in ranking.pareto for tid in evaluation.trial_ids]
         self.store.save_generation(
             study.study_id, batch.index + 1, ga_state or b"", pareto_ids, recommendation
@@ -287,10 +378,13 @@ class Driver:
             study.study_id,
             batch.index,
             ranking.best_f1,
-            _verdict(ranking),
+            verdict,
         )
-        if batch.index >= context.last_batch:
-            self.store.set_status(study.study_id, StudyStatus.DONE, _verdict(ranking))
+        hopeless = _all_invalid(evaluations, batch) if batch.index == 0 else ""
+        if hopeless:
+            self.store.set_status(study.study_id, StudyStatus.FAILED, hopeless)
+        elif batch.index >= context.last_batch:
+            self.store.set_status(study.study_id, StudyStatus.DONE, verdict)
 
     # -- execution ------------------------------------------------------------------------------
 
@@ -317,12 +411,21 @@ class Driver:
             to_send += lost
         if to_send:
             self.executor.submit(to_send)
-            self.store.mark_queued([spec.trial_id for spec in to_send])
+            waiting = getattr(self.executor, "waiting", dict)()  # engine -> why its trials wait
+            for message in {"", *waiting.values()}:
+                ids = [spec.trial_id for spec in to_send if waiting.get(spec.engine, "") == message]
+                if ids and message:
+                    self.store.mark_queued(ids, message)
+                elif ids:
+                    self.store.mark_queued(ids)
 
     def _withdraw(self, study_id: str) -> None:
         """Stop a paused or cancelled study's work; on resume, reconciliation re-sends it."""
         if study_id in self._last_reconcile or study_id in self._batches:
-            in_flight = [record.spec.trial_id for record in self.store.trials(study_id, IN_FLIGHT)]
+            # Cancelling marks queued and running trials ``cancelled`` in the store at once; the
+            # executor may still hold or run them, so they are withdrawn too.
+            withdraw = (*IN_FLIGHT, TrialState.CANCELLED)
+            in_flight = [record.spec.trial_id for record in self.store.trials(study_id, withdraw)]
             if in_flight:
                 self.executor.cancel(in_flight)
             self._last_reconcile.pop(study_id, None)
@@ -339,8 +442,11 @@ class Driver:
             definition = context.definition
             evaluations = evaluate(records, definition, context.n_items)
             batches = context.last_batch + 1
-            reevaluation = sum(record.spec.generation > definition.ga.generations for record in records)
-            planned = definition.ga.individuals() * definition.replicates + reevaluation
+            extra = sum(record.spec.replicate >= definition.replicates for record in records)
+            checking = definition.validation_batch()
+            if study.generation < checking:
+                extra += definition.validation.simulations()  # an upper bound until it starts
+            planned = definition.search_simulations() + extra
         return Progress(
             study_id=study.study_id,
             status=study.status,
@@ -354,6 +460,79 @@ class Driver:
             recorded=recorded,
             message=study.message,
         )
+
+
+def _first_batches(records: list[TrialRecord]) -> dict[int, int]:
+    """Individual -> the batch it was created in (its extra replicates come in later batches)."""
+    born: dict[int, int] = {}
+    for record in records:
+        individual = record.spec.individual
+        born[individual] = min(born.get(individual, record.spec.generation), record.spec.generation)
+    return born
+
+
+def _objectives_and_constraints(evaluations: list[Evaluation]) -> tuple[np.ndarray, np.ndarray]:
+    """F and G of the search interface (``optimizer/ga.py``), rows in the given order."""
+    objectives = np.array([[ev.f1, ev.f2] for ev in evaluations], dtype=float)
+    constraints = np.array([[ev.g_match, ev.g_validity] for ev in evaluations], dtype=float)
+    return objectives, constraints
+
+
+def _all_invalid(evaluations: list[Evaluation], batch: _Batch) -> str:
+    """The message ending a study whose whole initial population left the contact model."""
+    initial = [ev for ev in evaluations if ev.individual in set(batch.individuals)]
+    if not initial or any(ev.status != SimulationStatus.INVALID.value for ev in initial):
+        return ""
+    softest = max(ev.params["E"] for ev in initial)
+    return (
+        f"all {len(initial)} sets of the initial population were invalid (the linear contact "
+        f"model's overlap limit was exceeded up to E = {softest:.3g} Pa): the parameter bounds lie "
+        "where the model is invalid, so nothing can be calibrated; raise parameters.E (its low bound "
+        f"above {softest:.3g} Pa). First: {initial[-1].failure}"
+    )
+
+
+def _validated(
+    ranking: Ranking, records: list[TrialRecord], definition: StudyDefinition
+) -> tuple[dict | None, str]:
+    """The recommendation after the validation: the fastest validated set, with the table."""
+    checked = validation.candidates(
+        [] if ranking.recommendation is None else [ranking.recommendation, *ranking.equivalent], definition
+    )
+    if not checked:
+        return None, _verdict(ranking)
+    rows = validation.table(checked, records, definition) if definition.validation.seeds else []
+    chosen = next((i for i, row in enumerate(rows) if row["verdict"] == validation.VALIDATED), None)
+    status = (
+        validation.VALIDATED
+        if chosen is not None
+        else (validation.NOT_REPRODUCED if definition.validation.seeds else NOT_VALIDATED)
+    )
+    pick = checked[chosen if chosen is not None else 0]
+    others = [ev for ev in [ranking.recommendation, *ranking.equivalent] if ev is not pick]
+    recommendation = {
+        **summary(pick),
+        "target": definition.experiment.target(),
+        "tolerance": definition.match_tolerance(),
+        "objective_time": definition.objective_time,
+        "equivalent": [summary(ev) for ev in others],
+        "validation_status": status,
+        "validation": rows,
+    }
+    if status == validation.VALIDATED:
+        row = rows[chosen]
+        verdict = (
+            f"recommended individual {pick.individual}, validated on {len(row['n_remaining'])} fresh "
+            f"seeds (median N_t {row['median']:g}, W1 {row['w1']:.2f})"
+        )
+    elif status == NOT_VALIDATED:
+        verdict = f"recommended individual {pick.individual}, not validated (validation.seeds = 0)"
+    else:
+        verdict = (
+            f"no candidate reproduced the experiment on fresh seeds ({len(rows)} tried); individual "
+            f"{pick.individual} is the fastest match of the search, not reproduced"
+        )
+    return recommendation, verdict
 
 
 def _verdict(ranking: Ranking) -> str:

@@ -1,6 +1,25 @@
 """The search algorithm behind a study, driven with ask/tell: ``ask()`` gives the genes of the
 next batch (the initial population, then each generation's offspring), something else simulates
-them, ``tell(genes, F)`` hands back their objectives. It never calls a simulation.
+them, ``tell(genes, F, G)`` hands back their objectives and constraints. It never calls a
+simulation.
+
+The interface every algorithm implements (``Search``), rows in ``ask()``'s order:
+
+- ``F`` (n x 2): f1 (match) and f2 (cost), both minimised (``optimizer/objectives.py``);
+- ``G`` (n x 2): ``g_match = f1 - tolerance`` and ``g_validity`` (0 for a set whose replicates are
+  all measurements, > 0 for ``invalid`` or otherwise failed runs), feasible when <= 0;
+- ``observations``: optional, by keyword: each row's measured N_t (the surrogate models them);
+- ``revise(genes, F, G)``: earlier individuals got more replicates; their F and G changed.
+
+Why constraints: the paper's problem is "equate N_t with the experiment, then minimise T". With
+match and cost as two equal objectives NSGA-II spent the paper's budget in the cheap corner where
+the tray empties (185 simulations, no match). With the match as a constraint, pymoo's feasibility
+rules (Deb 2000: feasible beats infeasible, two infeasible sets compare by violation, two feasible
+ones by rank and crowding on F) make every comparison before the first match a comparison of f1,
+so the budget goes to the match; among matching sets the search is multi-objective on (f1, f2),
+which keeps the fastest matching set and the trade-off within the tolerance. An invalid run is a
+violation larger than any valid set's, never a measurement of N_t. A lexicographic order would
+rank the same way but lose the spread within the tolerance that NSGA-II's crowding keeps.
 
 - ``nsga2`` (default): pymoo's NSGA-II, elitist survival by rank and crowding, as the paper's
   MOGA: one-point crossover (``SinglePointCrossover``, probability ``ga.crossover_prob``),
@@ -10,6 +29,8 @@ them, ``tell(genes, F)`` hands back their objectives. It never calls a simulatio
   Not offered: SMS-EMOA (pymoo 0.6.2's instance cannot be pickled, so its state could not
   survive a restart) and AGE-MOEA (its numba kernels compile for about 20 s in every process).
 - ``random``: uniform random search with the same batch sizes: the honest baseline.
+- ``surrogate``: Gaussian-process models of the response's distribution, the cost and the
+  failures choose each batch (``optimizer/surrogate.py``).
 
 Genes live in [0, 1] (see ``optimizer/space.py``). Randomness comes only from the generator
 seeded with the study seed (pymoo 0.6.2 keeps it in ``algorithm.random_state``), so a study is
@@ -33,15 +54,18 @@ from pymoo.operators.mutation.pm import PM
 from pymoo.problems.static import StaticProblem
 
 from optimizer.study import GASettings
+from optimizer.surrogate import MatchRule, SurrogateSearch
 
 N_OBJECTIVES = 2
+N_CONSTRAINTS = 2  # g_match, g_validity
 
 
 class CalibrationProblem(Problem):
-    """The box pymoo searches: n genes in [0, 1], two objectives. Never evaluated by pymoo."""
+    """The box pymoo searches: n genes in [0, 1], two objectives, two inequality constraints.
+    Never evaluated by pymoo."""
 
     def __init__(self, n_genes: int):
-        super().__init__(n_var=n_genes, n_obj=N_OBJECTIVES, xl=0.0, xu=1.0)
+        super().__init__(n_var=n_genes, n_obj=N_OBJECTIVES, n_ieq_constr=N_CONSTRAINTS, xl=0.0, xu=1.0)
 
 
 class RandomSearch:
@@ -58,8 +82,19 @@ class RandomSearch:
         size = self.population if self.told == 0 else self.offspring
         return self.rng.random((size, self.n_genes))
 
-    def tell(self, genes: np.ndarray, objectives: np.ndarray) -> None:
+    def tell(
+        self,
+        genes: np.ndarray,
+        objectives: np.ndarray,
+        constraints: np.ndarray | None = None,
+        observations=None,
+    ) -> None:
         self.told += 1
+
+    def revise(
+        self, genes: np.ndarray, objectives: np.ndarray, constraints: np.ndarray, observations=None
+    ) -> None:
+        """Nothing to revise: random search keeps no memory of its samples."""
 
 
 class PymooSearch:
@@ -84,20 +119,49 @@ class PymooSearch:
     def ask(self) -> np.ndarray:
         return np.asarray(self.algorithm.ask().get("X"), dtype=float)
 
-    def tell(self, genes: np.ndarray, objectives: np.ndarray) -> None:
+    def tell(
+        self,
+        genes: np.ndarray,
+        objectives: np.ndarray,
+        constraints: np.ndarray | None = None,
+        observations=None,
+    ) -> None:
         population = Population.new("X", np.asarray(genes, dtype=float))
-        Evaluator().eval(
-            StaticProblem(self.algorithm.problem, F=np.asarray(objectives, dtype=float)), population
-        )
+        objectives = np.asarray(objectives, dtype=float)
+        if constraints is None:  # no constraint known: every set counts as feasible
+            constraints = np.zeros((len(objectives), N_CONSTRAINTS))
+        values = dict(F=objectives, G=np.asarray(constraints, dtype=float))
+        Evaluator().eval(StaticProblem(self.algorithm.problem, **values), population)
         self.algorithm.tell(infills=population)
 
+    def revise(
+        self, genes: np.ndarray, objectives: np.ndarray, constraints: np.ndarray, observations=None
+    ) -> None:
+        """Earlier individuals were re-measured (extra replicates): survivors with these genes take
+        the new F and G, so an elite that stopped matching loses its place at the next survival."""
+        population = self.algorithm.pop
+        if population is None or len(population) == 0:
+            return
+        kept = population.get("X")
+        for row, gene in enumerate(np.asarray(genes, dtype=float)):
+            for index in np.flatnonzero(np.all(np.isclose(kept, gene, rtol=0, atol=1e-12), axis=1)):
+                individual = population[index]
+                individual.F = np.asarray(objectives[row], dtype=float)
+                individual.G = np.asarray(constraints[row], dtype=float)
+                individual.CV = None  # recomputed from G on the next read
 
-Search = RandomSearch | PymooSearch
+
+Search = RandomSearch | PymooSearch | SurrogateSearch
 
 
-def create_search(settings: GASettings, n_genes: int, seed: int) -> Search:
+def create_search(settings: GASettings, n_genes: int, seed: int, rule: MatchRule | None = None) -> Search:
+    """The study's search; ``rule`` (how f1 is formed) is needed by the surrogate only."""
     if settings.algorithm == "random":
         return RandomSearch(n_genes, settings.population, settings.offspring, seed)
+    if settings.algorithm == "surrogate":
+        if rule is None:
+            raise ValueError("the surrogate search needs the study's match rule")
+        return SurrogateSearch(n_genes, settings.population, settings.offspring, seed, rule)
     return PymooSearch(settings, n_genes, seed)
 
 

@@ -1,6 +1,6 @@
 """In-memory Store and a synthetic Executor, for unit tests of the optimiser only.
 
-``MemoryStore`` keeps the same promises as the SQL store (``api/store.py``): a result is recorded
+``MemoryStore`` keeps the same promises as the SQL store (``api/store/``): a result is recorded
 once, a stored trial is never overwritten by ``add_trials``, records handed out are copies.
 ``SyntheticExecutor`` computes a result from a formula instead of a DEM simulation, so the GA,
 the ranking and the driver can be tested in milliseconds; it must never be used for a real study,
@@ -75,7 +75,7 @@ class MemoryStore:
                 if record.spec.study_id == study_id and (states is None or record.state in states)
             ]
 
-    def mark_queued(self, trial_ids: Sequence[str]) -> None:
+    def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
         with self._lock:
             for tid in trial_ids:
                 record = self._trials[tid]
@@ -135,6 +135,24 @@ def synthetic_result(spec: TrialSpec, n_items: int = 30) -> SimulationResult:
         params=params,
         seed=spec.seed,
     )
+
+
+def synthetic_with_failures(spec: TrialSpec, n_items: int = 30) -> SimulationResult:
+    """:func:`synthetic_result`, except that soft sets (E < 1e6 Pa) blow up and every seventh
+    individual from the fourth on times out. Both report the count where they stopped, which
+    no view may show as N_t: tests of how failures are shown and counted use it."""
+    result = synthetic_result(spec, n_items)
+    if spec.params["E"] < 1e6:
+        return result.model_copy(update={
+            "status": SimulationStatus.UNSTABLE, "n_remaining": n_items,
+            "message": "unstable at t=0.1 s: overlap beyond overlap_limit of a sphere radius",
+        })
+    if spec.individual % 7 == 3:
+        return result.model_copy(update={
+            "status": SimulationStatus.TIMEOUT, "n_remaining": n_items // 2,
+            "message": "timeout after 120 s of wall time",
+        })
+    return result
 
 
 class SyntheticExecutor:

@@ -1,10 +1,12 @@
 """Ranking a study's individuals: Pareto fronts, the recommendation and the equivalent sets.
 
-- Fronts: pymoo's non-dominated sorting of (f1, f2), both minimised.
+- Fronts: pymoo's non-dominated sorting of (f1, f2), both minimised, over measured sets only
+  (a failed or invalid set has no f1, only a penalty).
 - Recommendation: the fastest (lowest f2) individual whose f1 is within the experiment's
-  tolerance. Such an individual is always on the first front unless another one is exactly as
-  fast and matches better, in which case that one is chosen: ties go to the lower f1, then the
-  earlier individual.
+  tolerance and that has its full replicates (``max_replicates``). Such an individual is always
+  on the first front unless another one is exactly as fast and matches better, in which case
+  that one is chosen: ties go to the lower f1, then the earlier individual. After the validation
+  the driver replaces it with the fastest validated set (``optimizer/validation.py``).
 - Equivalent sets: the other matching individuals, slower ones included, kept only when they are
   distinct in parameter space (normalised gene distance at least ``min_distance`` from every set
   already listed). The paper expects the calibration to be multimodal; an engineer picking a
@@ -29,7 +31,12 @@ DEFAULT_MIN_DISTANCE = 0.1
 
 
 def fronts(evaluations: Sequence[Evaluation]) -> list[list[Evaluation]]:
-    """Non-dominated fronts, best first; each front sorted by f2 (fastest first)."""
+    """Non-dominated fronts of the measured sets, best first; each sorted by f2 (fastest first).
+
+    A failed or invalid set has no measured f1 (its objectives are a penalty), so it is on no
+    front: it is a constraint violation for the search and a failure for the views.
+    """
+    evaluations = [evaluation for evaluation in evaluations if evaluation.ok]
     if not evaluations:
         return []
     objectives = np.array([[evaluation.f1, evaluation.f2] for evaluation in evaluations], dtype=float)
@@ -56,9 +63,14 @@ def rank(
     tolerance: float,
     space: ParameterSpace,
     min_distance: float = DEFAULT_MIN_DISTANCE,
+    min_replicates: int = 1,
 ) -> Ranking:
     matching = sorted(
-        (evaluation for evaluation in evaluations if evaluation.matches(tolerance)),
+        (
+            evaluation
+            for evaluation in evaluations
+            if evaluation.matches(tolerance) and evaluation.n_replicates >= min_replicates
+        ),
         key=lambda ev: (ev.f2, ev.f1, ev.individual),
     )
     listed: list[Evaluation] = []
@@ -81,11 +93,17 @@ def summary(evaluation: Evaluation) -> dict:
         "generation": evaluation.generation,
         "params": evaluation.params,
         "f1": evaluation.f1,
+        "f1_interval": list(evaluation.f1_interval),
         "f2": evaluation.f2,
+        "status": evaluation.status,
+        "violation": evaluation.violation,
+        "replicates": evaluation.n_replicates,
         "n_remaining": evaluation.n_remaining,
+        "responses": evaluation.responses,
         "wall_time_s": evaluation.wall_time_s,
         "cost": evaluation.cost,
         "trial_ids": evaluation.trial_ids,
+        "failure": evaluation.failure,
     }
 
 

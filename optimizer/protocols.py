@@ -13,9 +13,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol
 
+from dem.parameters import PARAMETER_NAMES  # noqa: F401 - re-exported: the names a trial carries
 from dem.result import SimulationResult
-
-PARAMETER_NAMES = ("E", "nu", "e", "mu")
 
 
 class TrialState(StrEnum):
@@ -40,6 +39,11 @@ def trial_id(study_id: str, individual: int, replicate: int) -> str:
     return f"{study_id}-i{individual:05d}-r{replicate:02d}"
 
 
+def is_trial_of(trial: str, study_id: str) -> bool:
+    """Whether a trial id belongs to a study, without asking the store (it may be deleted)."""
+    return bool(study_id) and trial.startswith(f"{study_id}-i")
+
+
 @dataclass(frozen=True)
 class TrialSpec:
     """Everything a worker needs to run one simulation; JSON-able, no database needed."""
@@ -54,6 +58,8 @@ class TrialSpec:
     scenario: dict[str, Any]
     timeout_s: float | None = None
     keep_snapshots: bool = False  # the worker keeps the run's snapshots for a replay
+    engine: str = "numba"  # which engine runs it (dem/engines); a worker must have it
+    engine_options: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -108,6 +114,8 @@ class Executor(Protocol):
     def close(self) -> None:
         """Release processes and connections."""
 
+    # Optional: ``waiting() -> dict[engine, message]`` for engines no worker takes (RqExecutor).
+
 
 class Store(Protocol):
     """Where a study's truth lives. Every method is one transaction."""
@@ -121,7 +129,8 @@ class Store(Protocol):
 
     def trials(self, study_id: str, states: Sequence[TrialState] | None = None) -> list[TrialRecord]: ...
 
-    def mark_queued(self, trial_ids: Sequence[str]) -> None: ...
+    def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
+        """Queued trials; ``message`` says why they may wait (e.g. no worker has their engine)."""
 
     def mark_running(self, trial_id: str, worker: str | None = None) -> None: ...
 

@@ -2,7 +2,12 @@
 
 The summary carries what an engineer reads first: the recommendation and its equivalent sets,
 the Pareto front, the paper's Fig. 5 as numbers (median and spread of N_t and of f2 per
-generation), and how many simulations it took until a parameter set first matched the experiment.
+generation), how many simulations it took until a parameter set first matched the experiment, and
+the runs that measured nothing, counted by status (``optimizer/outcomes.py``): they never appear
+as an N_t value, in the CSV, the summary or the pictures, and every view counts them the same way.
+It also carries the progress against simulations (hypervolume and best f1 per batch,
+``optimizer/progress.py``) and which parameters the experiment pins down
+(``optimizer/identifiability.py``).
 
 Computed from a study's record and trials only (what any Store returns); it must not run or
 change anything. matplotlib is imported inside :func:`write_pareto_png` (Agg backend), so
@@ -17,8 +22,17 @@ import statistics
 from pathlib import Path
 from typing import Any
 
+from optimizer.identifiability import identifiability
 from optimizer.objectives import Evaluation, evaluate
+from optimizer.outcomes import (
+    count_failures,
+    failure_status,
+    individual_failures,
+    measured_n,
+    shown_objectives,
+)
 from optimizer.pareto import rank, summary
+from optimizer.progress import study_progress
 from optimizer.protocols import PARAMETER_NAMES, StudyRecord, TrialRecord
 from optimizer.space import ParameterSpace
 from optimizer.study import StudyDefinition
@@ -40,6 +54,7 @@ CSV_COLUMNS = (
     "dt",
     "f1",
     "f2",
+    "failure",
     "pareto",
     "worker",
     "message",
@@ -60,21 +75,57 @@ def _spread(values: list[float]) -> dict[str, float] | None:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
+def _measured(record: TrialRecord, response: str = "n_remaining") -> float | None:
+    """A run's value of ``response``, only if it measured (ended ok)."""
+    result = record.result
+    if result is None:
+        return None
+    return measured_n(result.status.value, result.responses.get(response))
+
+
+def failures_json(records: list[TrialRecord]) -> dict[str, Any]:
+    """Runs that measured nothing: counts by status, the sentence views print, and per status the
+    first run's message (what an engineer reads to decide what to change)."""
+    finished = sorted(
+        (record for record in records if record.result is not None),
+        key=lambda record: (record.spec.individual, record.spec.replicate),
+    )
+    counts = count_failures(record.result.status.value for record in finished)
+    first_message: dict[str, str] = {}
+    for record in finished:
+        first_message.setdefault(record.result.status.value, record.result.message)
+    return {
+        **counts.as_json(),
+        "text": counts.text(),
+        "first_message": {status: first_message[status] for status in counts.by_status},
+    }
+
+
 def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, Any]:
     definition = StudyDefinition.model_validate(study.definition)
     experiment = definition.experiment
     space = ParameterSpace(definition.parameters)
     evaluations = evaluate(records, definition, definition.n_items())
-    ranking = rank(evaluations, experiment.tolerance, space)
+    ranking = rank(evaluations, definition.match_tolerance(), space, min_replicates=definition.max_replicates)
+    runs_by_generation: dict[int, list[TrialRecord]] = {}
+    for record in records:
+        if record.result is not None:
+            runs_by_generation.setdefault(record.spec.generation, []).append(record)
     generations = []
-    for generation in sorted({evaluation.generation for evaluation in evaluations}):
+    # Every batch with runs, so that the failed runs per batch add up to the study's count (extra
+    # replicates and a validation are batches without new individuals).
+    for generation in sorted({ev.generation for ev in evaluations} | set(runs_by_generation)):
         members = [ev for ev in evaluations if ev.generation == generation and ev.ok]
+        runs = runs_by_generation.get(generation, [])
+        failed = count_failures(record.result.status.value for record in runs)
         generations.append(
             {
                 "generation": generation,
                 "individuals": sum(ev.generation == generation for ev in evaluations),
-                "failed": sum(ev.generation == generation and not ev.ok for ev in evaluations),
-                "n_remaining": _spread([n for ev in members for n in ev.n_remaining]),
+                "simulations": len(runs),
+                "failed": failed.total,
+                "failed_by_status": failed.by_status,
+                "n_remaining": _spread([n for n in (_measured(record) for record in runs) if n is not None]),
                 "f2": _spread([ev.f2 for ev in members]),
             }
         )
@@ -83,31 +134,44 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         "name": definition.name,
         "status": study.status.value,
         "message": study.message,
+        "response": experiment.response,
         "target": experiment.target(),
-        "tolerance": experiment.tolerance,
+        "tolerance": definition.match_tolerance(),
         "measured": experiment.measured,
         "objective_time": definition.objective_time,
         "algorithm": definition.ga.algorithm,
         "simulations": sum(record.result is not None for record in records),
         "simulations_planned": definition.total_simulations(),
         "simulations_until_first_match": first_match(
-            evaluations, experiment.tolerance, definition.replicates
+            evaluations, definition.match_tolerance(), definition.replicates
         ),
         "best_f1": ranking.best_f1,
-        "recommendation": summary(ranking.recommendation) if ranking.recommendation else None,
+        "failures": failures_json(records),
+        # The stored recommendation is the driver's: after the validation, the fastest validated set.
+        "recommendation": study.recommendation
+        or (summary(ranking.recommendation) if ranking.recommendation else None),
+        "validation_status": (study.recommendation or {}).get("validation_status"),
+        "validation": (study.recommendation or {}).get("validation", []),
         "equivalent": [summary(evaluation) for evaluation in ranking.equivalent],
         "pareto": [summary(evaluation) for evaluation in ranking.pareto],
         "generations": generations,
+        "progress": study_progress(
+            records, definition, study.generation, (study.recommendation or {}).get("validation", [])
+        ).as_json(),
+        "identifiability": identifiability(evaluations, space, experiment.tolerance),
     }
 
 
 def write_trials_csv(path: Path, definition: StudyDefinition, records: list[TrialRecord]) -> None:
     evaluations = evaluate(records, definition, definition.n_items())
-    objectives = {tid: evaluation for evaluation in evaluations for tid in evaluation.trial_ids}
+    objectives = shown_objectives(evaluations)
+    failures = individual_failures(
+        (r.spec.individual, r.spec.replicate, r.result.status.value) for r in records if r.result
+    )
     space = ParameterSpace(definition.parameters)
     pareto = {
         tid
-        for evaluation in rank(evaluations, definition.experiment.tolerance, space).pareto
+        for evaluation in rank(evaluations, definition.match_tolerance(), space).pareto
         for tid in evaluation.trial_ids
     }
     with path.open("w", newline="") as handle:
@@ -115,7 +179,7 @@ def write_trials_csv(path: Path, definition: StudyDefinition, records: list[Tria
         writer.writeheader()
         for record in sorted(records, key=lambda r: (r.spec.individual, r.spec.replicate)):
             spec, result = record.spec, record.result
-            evaluation = objectives.get(spec.trial_id)
+            f1, f2 = objectives.get(spec.trial_id, (None, None))
             row = {
                 "trial_id": spec.trial_id,
                 "individual": spec.individual,
@@ -124,15 +188,16 @@ def write_trials_csv(path: Path, definition: StudyDefinition, records: list[Tria
                 "seed": spec.seed,
                 **{name: spec.params.get(name) for name in PARAMETER_NAMES},
                 "state": record.state.value,
-                "f1": evaluation.f1 if evaluation else None,
-                "f2": evaluation.f2 if evaluation else None,
+                "f1": f1,
+                "f2": f2,
+                "failure": failures.get(spec.individual, ""),
                 "pareto": spec.trial_id in pareto,
                 "worker": record.worker,
             }
             if result is not None:
                 row.update(
                     status=result.status.value,
-                    n_remaining=result.n_remaining,
+                    n_remaining=measured_n(result.status.value, result.n_remaining),
                     n_items=result.n_items,
                     wall_time_s=result.wall_time_s,
                     cost=result.cost,
@@ -143,54 +208,135 @@ def write_trials_csv(path: Path, definition: StudyDefinition, records: list[Tria
             writer.writerow(row)
 
 
+# Marker and colour per failed status (Okabe-Ito colours); a status not listed gets the fallback.
+FAILURE_STYLE = {
+    "invalid": ("^", "#cc79a7"),
+    "unstable": ("X", "#d55e00"),
+    "timeout": ("s", "#e69f00"),
+    "error": ("D", "#000000"),
+    "cancelled": ("o", "#999999"),
+}
+FAILURE_FALLBACK = ("P", "#56b4e9")
+
+
+def _failure_style(status: str) -> tuple[str, str]:
+    return FAILURE_STYLE.get(status, FAILURE_FALLBACK)
+
+
 def write_pareto_png(
-    path: Path, summary_json: dict[str, Any], evaluations: list[Evaluation], records: list[TrialRecord]
+    path: Path,
+    summary_json: dict[str, Any],
+    evaluations: list[Evaluation],
+    records: list[TrialRecord],
+    last_generation: int | None = None,
 ) -> None:
-    """Left: every individual in (f2, f1) with the front and the recommendation; right: N_t per
-    generation against the target (the paper's Fig. 5a)."""
+    """Left: every measured individual in (f2, f1) with the front and the recommendation; right:
+    measured N_t per generation against the target (the paper's Fig. 5a). Above each, in a strip
+    of its own, what measured nothing: failed individuals at their real f2, marked by status, and
+    failed runs per generation stacked by status."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
-    if evaluations:
+    fig, axes = plt.subplots(
+        2, 2, figsize=(11, 5.6), sharex="col", gridspec_kw={"height_ratios": [1, 4], "hspace": 0.08}
+    )
+    (left_failed, right_failed), (left, right) = axes
+    wall = summary_json["objective_time"] == "wall"
+    measured = [ev for ev in evaluations if ev.ok]
+    failed = [ev for ev in evaluations if not ev.ok]
+    if measured:
         points = left.scatter(
-            [ev.f2 for ev in evaluations],
-            [ev.f1 for ev in evaluations],
-            c=[ev.generation for ev in evaluations],
+            [ev.f2 for ev in measured],
+            [ev.f1 for ev in measured],
+            c=[ev.generation for ev in measured],
             cmap="viridis",
             s=18,
         )
-        fig.colorbar(points, ax=left, label="generation")
-        if min(ev.f2 for ev in evaluations) > 0:
-            left.set_xscale("log")
-    front = summary_json["pareto"]
+        fig.colorbar(points, ax=[left_failed, left], label="generation")
+    real_f2 = [ev.wall_time_s if wall else ev.cost for ev in evaluations]
+    if real_f2 and min(real_f2) > 0:
+        left.set_xscale("log")
+    front = [member for member in summary_json["pareto"] if not member.get("failure")]
     if front:
         left.plot([ev["f2"] for ev in front], [ev["f1"] for ev in front], "k-", lw=1, label="Pareto front")
     left.axhline(summary_json["tolerance"], color="tab:red", ls="--", lw=1, label="tolerance")
     chosen = summary_json["recommendation"]
     if chosen:
         left.scatter([chosen["f2"]], [chosen["f1"]], marker="*", s=250, color="tab:red", label="recommended")
-    left.set_xlabel("f2: " + ("cost" if summary_json["objective_time"] == "cost" else "wall time T, s"))
-    left.set_ylabel("f1: |N_t - target|")
-    left.legend(loc="upper right", fontsize=8)
+    left.set_xlabel("f2: " + ("wall time T, s" if wall else "cost"))
+    response = summary_json.get("response") or "n_remaining"
+    left.set_ylabel(f"f1: |{response} - target|")
+    left.legend(loc="best", fontsize=8)
+
+    statuses = list(summary_json["failures"]["by_status"])
+    by_status: dict[str, list[Evaluation]] = {}
+    for ev in failed:
+        by_status.setdefault(failure_status(ev) or "", []).append(ev)
+    for row, status in enumerate(statuses):
+        members = by_status.get(status, [])
+        marker, colour = _failure_style(status)
+        left_failed.scatter(
+            [ev.wall_time_s if wall else ev.cost for ev in members],
+            [row] * len(members),
+            marker=marker,
+            color=colour,
+            s=22,
+        )
+    _failure_strip(left_failed, statuses, f"failed individuals: {len(failed)} (not ranked)")
 
     by_generation: dict[int, list[int]] = {}
+    failed_by_generation: dict[int, dict[str, int]] = {}
+    for entry in summary_json["generations"]:
+        failed_by_generation[entry["generation"]] = entry["failed_by_status"]
     for record in records:
-        if record.result is not None and record.result.n_remaining is not None:
-            by_generation.setdefault(record.spec.generation, []).append(record.result.n_remaining)
+        if last_generation is not None and record.spec.generation > last_generation:
+            continue  # extra replicates and validation: not a generation of the search
+        n = _measured(record, response)
+        if n is not None:
+            by_generation.setdefault(record.spec.generation, []).append(n)
     generations = sorted(by_generation)
     if generations:
         right.boxplot([by_generation[g] for g in generations], positions=generations)
     right.axhline(summary_json["target"], color="tab:red", ls="--", lw=1, label="target")
     right.set_xlabel("generation")
-    right.set_ylabel("simulated N_t")
+    right.set_ylabel(f"measured {response} (ok runs)")
     right.legend(loc="upper right", fontsize=8)
+    bottom = dict.fromkeys(failed_by_generation, 0)
+    for status in statuses:
+        heights = [failed_by_generation[g].get(status, 0) for g in failed_by_generation]
+        right_failed.bar(
+            list(failed_by_generation),
+            heights,
+            bottom=[bottom[g] for g in failed_by_generation],
+            color=_failure_style(status)[1],
+            width=0.6,
+            label=status,
+        )
+        for generation, height in zip(failed_by_generation, heights, strict=True):
+            bottom[generation] += height
+    right_failed.set_ylabel("failed\nruns", fontsize=8)
+    right_failed.set_title(summary_json["failures"]["text"], fontsize=9, loc="left")
+    if statuses:
+        right_failed.legend(fontsize=7, loc="upper right", ncols=len(statuses))
+    right_failed.set_ylim(0, max(1, *bottom.values()) * 1.25 if bottom else 1)
+    right_failed.tick_params(labelsize=7)
+    right_failed.yaxis.set_major_locator(MaxNLocator(integer=True, nbins=3))
     fig.suptitle(f"{summary_json['name']} ({summary_json['study_id']})")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
+
+
+def _failure_strip(ax, statuses: list[str], title: str) -> None:
+    """One row per failed status, labelled, with the count in the title; 'none' when empty."""
+    ax.set_yticks(range(len(statuses)), statuses, fontsize=7)
+    ax.set_ylim(-0.7, max(len(statuses), 1) - 0.3)
+    ax.set_title(title, fontsize=9, loc="left")
+    if not statuses:
+        ax.set_yticks([])
+        ax.text(0.5, 0.4, "every run measured N_t", transform=ax.transAxes, ha="center", fontsize=8)
 
 
 def write_results(directory: Path, study: StudyRecord, records: list[TrialRecord]) -> dict[str, Any]:
@@ -201,5 +347,7 @@ def write_results(directory: Path, study: StudyRecord, records: list[TrialRecord
     (directory / "summary.json").write_text(json.dumps(summary_json, indent=2))
     write_trials_csv(directory / "trials.csv", definition, records)
     evaluations = evaluate(records, definition, definition.n_items())
-    write_pareto_png(directory / "pareto.png", summary_json, evaluations, records)
+    write_pareto_png(
+        directory / "pareto.png", summary_json, evaluations, records, definition.ga.generations
+    )
     return summary_json

@@ -16,15 +16,17 @@ about the GA's internals. Service limits (largest population, largest budget) ar
 from __future__ import annotations
 
 import decimal
+import functools
 import json
 import math
 import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from optimizer.protocols import PARAMETER_NAMES
+from dem.parameters import PARAMETER_NAMES, in_physical_range, physical_range_text
 
 
 class StudyDefinitionError(ValueError):
@@ -35,16 +37,11 @@ class StudyLimitError(StudyDefinitionError):
     """A valid study asks for more than this service allows (population, simulations)."""
 
 
-# Physical ranges: open bounds are excluded (E > 0, -1 < nu < 0.5, 0 < e <= 1, mu >= 0).
-PHYSICAL_RANGES: dict[str, tuple[float, float, bool, bool]] = {
-    # name: (low, high, low inclusive, high inclusive)
-    "E": (0.0, math.inf, False, False),
-    "nu": (-1.0, 0.5, False, False),
-    "e": (0.0, 1.0, False, True),
-    "mu": (0.0, math.inf, True, False),
-}
-
-UNITS = {"E": "Pa", "nu": "-", "e": "-", "mu": "-"}
+# Replicate numbers below this are the search's; validation runs are numbered from it, so their
+# trial ids never collide with a search replicate.
+MAX_REPLICATES = 99
+VALIDATION_REPLICATE_BASE = 100
+NOISE_FLOOR_QUANTILE = 0.9
 
 DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
     "E": (1e5, 1e9),
@@ -54,20 +51,14 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
 }
 
 
-def _physical(name: str, value: float) -> bool:
-    low, high, low_in, high_in = PHYSICAL_RANGES[name]
-    above = value >= low if low_in else value > low
-    below = value <= high if high_in else value < high
-    return above and below and math.isfinite(value)
-
-
-def _range_text(name: str) -> str:
-    low, high, low_in, high_in = PHYSICAL_RANGES[name]
-    return f"{'[' if low_in else '('}{low:g}, {high:g}{']' if high_in else ')'}"
+# Larger measurements are no physical count or angle; they only overflow the target's arithmetic.
+MAX_MEASURED = 1e9
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # No Infinity or NaN anywhere: a study is computed with and stored as JSON (PostgreSQL refuses
+    # them), so they are refused at creation with the field's name.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class ParameterRange(_Strict):
@@ -94,10 +85,10 @@ class Parameters(_Strict):
             if spec.fixed is not None:
                 if spec.low is not None or spec.high is not None:
                     raise ValueError(f"parameters.{name}: give either 'fixed' or 'low'/'high', not both")
-                if not _physical(name, spec.fixed):
+                if not in_physical_range(name, spec.fixed):
                     raise ValueError(
                         f"parameters.{name}.fixed = {spec.fixed:g} is outside the physical range "
-                        f"{_range_text(name)}"
+                        f"{physical_range_text(name)}"
                     )
                 continue
             default_low, default_high = DEFAULT_BOUNDS[name]
@@ -106,10 +97,10 @@ class Parameters(_Strict):
             spec.log = (name == "E") if spec.log is None else spec.log
             for end in ("low", "high"):
                 value = getattr(spec, end)
-                if not _physical(name, value):
+                if not in_physical_range(name, value):
                     raise ValueError(
                         f"parameters.{name}.{end} = {value:g} is outside the physical range "
-                        f"{_range_text(name)}"
+                        f"{physical_range_text(name)}"
                     )
             if not spec.low < spec.high:
                 raise ValueError(
@@ -132,48 +123,86 @@ class Parameters(_Strict):
 
 
 class Experiment(_Strict):
-    """The measured response and how the calibration target is formed from it."""
+    """The measured values of one named response of the study's scenario and how the calibration
+    target is formed from them."""
 
+    response: str | None = Field(
+        None,
+        description="Which response of the scenario was measured (the feeder's 'n_remaining', a "
+        "heap's 'angle_deg', a combined scenario's 'heap.angle_deg'); default: the scenario's first.",
+    )
     measured: list[float] = Field(
-        ..., min_length=1, description="Measured N_t of each experiment (items left in the tray)."
+        ..., min_length=1, description="Measured values, one per repetition of the experiment."
     )
     aggregate: Literal["median", "mean"] = Field(
         "median", description="How replicates (simulated) and experiments (measured) are summarised."
     )
-    round: Literal["none", "half_up", "half_even"] = Field(
-        "half_up",
-        description="Rounding of the aggregated measurement to an item count: the paper used its "
-        "median 3.5 as 4, which is 'half_up'; 'half_even' would give 4 too but 2.5 -> 2.",
+    round: Literal["none", "half_up", "half_even"] | None = Field(
+        None,
+        description="Rounding of the aggregated measurement to a count: the paper used its median "
+        "3.5 as 4, which is 'half_up'; 'half_even' would give 4 too but 2.5 -> 2. Default: "
+        "'half_up' for an integer response, 'none' for a real one.",
     )
-    tolerance: float = Field(
-        0.5, ge=0, description="|simulated - target| at or below which a parameter set matches."
+    tolerance: float | None = Field(
+        None,
+        ge=0,
+        description="f1 at or below which a parameter set matches. Default: 0.5 items for "
+        "'aggregate'; for 'wasserstein', the experiment's own noise floor (see noise_floor).",
     )
-    distance: Literal["aggregate", "wasserstein"] = Field(
-        "aggregate",
+    distance: Literal["auto", "aggregate", "wasserstein"] = Field(
+        "auto",
         description="f1: 'aggregate' = |aggregate(simulated) - target|; 'wasserstein' = the "
-        "Wasserstein-1 distance between the simulated replicates and all measured values.",
+        "Wasserstein-1 distance between the simulated replicates and all measured values; 'auto' = "
+        "wasserstein with 3 or more replicates (f1 of a distribution, not of one lucky run), else "
+        "aggregate.",
     )
 
     @field_validator("measured")
     @classmethod
-    def _counts(cls, values: list[float]) -> list[float]:
+    def _finite(cls, values: list[float]) -> list[float]:
         for index, value in enumerate(values):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"measured[{index}] = {value} must be a finite count >= 0")
+            if not math.isfinite(value):
+                raise ValueError(f"measured[{index}] = {value} must be a finite number")
         return values
 
     def target(self) -> float:
         """The value simulations must reproduce, with the rounding rule applied."""
-        return round_count(aggregate(self.measured, self.aggregate), self.round)
+        return round_count(aggregate(self.measured, self.aggregate), self.round or "half_up")
+
+    def noise_floor(self, replicates: int, quantile: float = NOISE_FLOOR_QUANTILE) -> float:
+        """The W1 a perfect model would show: the ``quantile`` of the Wasserstein-1 distance
+        between ``replicates`` values drawn from the measured ones and the measured ones (a
+        deterministic bootstrap). A tolerance below it would reject the experiment itself."""
+        from optimizer.noise import wasserstein_many
+
+        rng = np.random.default_rng(0)
+        draws = rng.choice(np.asarray(self.measured, dtype=float), size=(4000, replicates))
+        return round(float(np.quantile(wasserstein_many(draws, self.measured), quantile)), 2)
+
+
+class Validation(_Strict):
+    """The end of every study: the recommendation and the next candidates re-simulated on fresh
+    seeds never used in the search (``optimizer/validation.py``)."""
+
+    seeds: int = Field(
+        10, ge=0, le=200, description="Fresh seeds per candidate; 0 skips the validation."
+    )
+    candidates: int = Field(
+        3, ge=1, le=20, description="The fastest matching sets validated (the recommendation first)."
+    )
+
+    def simulations(self) -> int:
+        return self.seeds * self.candidates
 
 
 class GASettings(_Strict):
     """The genetic algorithm: pymoo's NSGA-II with the paper's operators by default."""
 
-    algorithm: Literal["nsga2", "spea2", "random"] = Field(
+    algorithm: Literal["nsga2", "spea2", "random", "surrogate"] = Field(
         "nsga2",
-        description="'nsga2' (the paper's elitist MOGA), 'spea2' (strength Pareto archive), or "
-        "'random' (uniform random search with the same budget: the honest baseline).",
+        description="'nsga2' (the paper's elitist MOGA), 'spea2' (strength Pareto archive), "
+        "'random' (uniform random search with the same budget: the honest baseline), or "
+        "'surrogate' (Gaussian-process models choose each batch; fewest simulations).",
     )
     population: int = Field(50, ge=2, description="Initial population (simulated in generation 0).")
     offspring: int = Field(15, ge=1, description="New individuals per generation.")
@@ -191,21 +220,54 @@ class StudyDefinition(_Strict):
     name: str = Field("study", min_length=1, max_length=120, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
     description: str = ""
     scenario: dict[str, Any] = Field(
-        ..., description="The feeder configuration (dem.scenarios.feeder.FeederConfig) as a table."
+        ...,
+        description="The scenario's configuration as a table; its 'kind' (default 'feeder') picks the "
+        "scenario from dem.scenarios.registry, whose config model validates the rest.",
+    )
+    engine: str = Field(
+        "numba",
+        description="The engine that runs the simulations: 'numba' (built in), 'liggghts', or "
+        "'command' with engine_options (dem/engines).",
+    )
+    engine_options: dict[str, Any] = Field(
+        default_factory=dict,
+        description="The engine's options: the command engine's template, command and patterns; "
+        "LIGGGHTS' binary.",
     )
     parameters: Parameters = Field(default_factory=Parameters)
-    experiment: Experiment
+    experiments: list[Experiment] = Field(
+        ...,
+        min_length=1,
+        description="One or more experiments, each the measured values of one response. Several "
+        "are combined into one match objective f1 = max over experiments of |simulated - target| / "
+        "tolerance, so f1 <= 1 means every experiment matches (see optimizer/objectives.py). "
+        "'experiment = {...}' is accepted for one.",
+    )
     ga: GASettings = Field(default_factory=GASettings)
     replicates: int = Field(
-        1, ge=1, le=100, description="Simulations per individual, each with its own seed."
+        1,
+        ge=1,
+        le=MAX_REPLICATES,
+        description="Simulations per individual. Common random numbers: replicate r of every "
+        "individual uses the same seed, so sets are compared on the same draws.",
     )
-    elite_reevaluation: int = Field(
-        0,
-        ge=0,
-        le=100,
-        description="After the last generation, re-simulate every matching parameter set with this "
-        "many fresh seeds and rank on all its simulations (guards against a lucky seed).",
+    max_replicates: int | None = Field(
+        None,
+        ge=1,
+        le=MAX_REPLICATES,
+        description="Adaptive replicates: sets on or near the front (matching, or whose f1 interval "
+        "reaches the tolerance) earn replicates up to this many, inside the budget, and only a "
+        "set with this many can be recommended. Default: replicates (no extra replicates).",
     )
+    budget: int | None = Field(
+        None,
+        ge=1,
+        description="Simulations the study may run in all: the search (individuals x replicates), "
+        "the extra replicates, and the validation. What is left after the search and the "
+        "validation is the pool of extra replicates. Default: the search, plus (max_replicates - "
+        "replicates) x ga.offspring extra replicates, plus the validation.",
+    )
+    validation: Validation = Field(default_factory=Validation)
     objective_time: Literal["wall", "cost"] = Field(
         "cost",
         description="f2: 'wall' = wall seconds T (the paper); 'cost' = the machine-independent cost "
@@ -221,31 +283,243 @@ class StudyDefinition(_Strict):
         "under <data dir>/snapshots/<trial id>/ so the dashboard can replay the run.",
     )
 
+    @model_validator(mode="before")
+    @classmethod
+    def _one_experiment(cls, data: Any) -> Any:
+        """``experiment = {...}`` (one experiment, and every study stored before several existed)."""
+        if isinstance(data, dict) and "experiment" in data:
+            if "experiments" in data:
+                raise ValueError("give either 'experiment' (one) or 'experiments' (a list), not both")
+            from dem.scenarios.base import error_message
+
+            try:  # errors name the key the user wrote: experiment.measured, not experiments.0.measured
+                Experiment.model_validate(data["experiment"])
+            except ValidationError as exc:
+                raise ValueError(
+                    "; ".join(
+                        f"experiment.{'.'.join(str(p) for p in err['loc'])}: {error_message(err, Experiment)}"
+                        for err in exc.errors()
+                    )
+                ) from None
+            data = {**data, "experiments": [data["experiment"]]}
+            del data["experiment"]
+        return data
+
+    @model_validator(mode="after")
+    def _responses_and_engine(self) -> StudyDefinition:
+        """Every experiment names a response the scenario measures; the engine can run it."""
+        from dem.engines.base import UnknownEngineError, refusal
+        from dem.scenarios.registry import for_config
+
+        scenario = for_config(self.scenario)
+        declared = {r.name: r for r in scenario.declared(self.scenario)}
+        for index, experiment in enumerate(self.experiments):
+            name = experiment.response or next(iter(declared))
+            if name not in declared:
+                raise ValueError(
+                    f"experiments[{index}].response: scenario {scenario.kind!r} has no response "
+                    f"{name!r}; it measures {', '.join(declared)}"
+                )
+            experiment.response = name
+            if experiment.round is None:
+                experiment.round = "half_up" if declared[name].integer else "none"
+        if len(self.experiments) > 1 and self.ga.algorithm == "surrogate":
+            raise ValueError(
+                "ga.algorithm: the surrogate search models one response; with several experiments "
+                "use 'nsga2' (or 'spea2', 'random')"
+            )
+        try:
+            problem = refusal(self.engine, scenario, self.scenario, self.engine_options)
+        except UnknownEngineError as exc:
+            raise ValueError(f"engine: {exc}") from None
+        if problem:
+            raise ValueError(f"engine: {problem}")
+        return self
+
+    @property
+    def experiment(self) -> Experiment:
+        """The first experiment (the only one in most studies)."""
+        return self.experiments[0]
+
+    def match_tolerance(self) -> float:
+        """f1 at or below which a parameter set matches: the experiment's tolerance, or 1 when
+        several experiments are combined (each distance is divided by its own tolerance)."""
+        return self.experiments[0].tolerance if len(self.experiments) == 1 else 1.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _former_elite_reevaluation(cls, data: Any) -> Any:
+        """Definitions stored before adaptive replicates: elite_reevaluation = k meant k more
+        seeds for every matching set; it becomes max_replicates = replicates + k."""
+        if isinstance(data, dict) and "elite_reevaluation" in data:
+            data = dict(data)
+            extra = data.pop("elite_reevaluation") or 0
+            if extra and data.get("max_replicates") is None:
+                data["max_replicates"] = int(data.get("replicates", 1)) + int(extra)
+        return data
+
+    @model_validator(mode="after")
+    def _resolve_and_fit_the_budget(self) -> StudyDefinition:
+        """Resolve the defaults that depend on replicates; refuse a budget that cannot hold the
+        search and the validation, saying what fits."""
+        for experiment in self.experiments:
+            if experiment.distance == "auto":
+                experiment.distance = "wasserstein" if self.replicates >= 3 else "aggregate"
+            if experiment.tolerance is None:
+                wasserstein = experiment.distance == "wasserstein"
+                experiment.tolerance = experiment.noise_floor(self.replicates) if wasserstein else 0.5
+        if self.max_replicates is None:
+            self.max_replicates = self.replicates
+        if self.max_replicates < self.replicates:
+            raise ValueError(
+                f"max_replicates ({self.max_replicates}) must be at least replicates ({self.replicates})"
+            )
+        if self.budget is None:
+            self.budget = self.search_simulations() + self._default_pool() + self.validation.simulations()
+        needed = self.search_simulations() + self.validation.simulations()
+        if self.budget < needed:
+            raise ValueError(self._what_fits(needed))
+        return self
+
+    def _default_pool(self) -> int:
+        return (self.max_replicates - self.replicates) * self.ga.offspring
+
+    def fits_within(self, budget: int) -> list[str]:
+        """The changes, one field each, that would make the search and the validation fit."""
+        ga, checks, search = self.ga, self.validation.simulations(), self.search_simulations()
+        fits = []
+        if budget - checks >= ga.individuals():
+            fits.append(f"replicates <= {(budget - checks) // ga.individuals()}")
+        room = (budget - checks) // self.replicates - ga.offspring * ga.generations
+        if room >= 2:
+            fits.append(f"ga.population <= {room}")
+        if budget - search >= 0:
+            fits.append(f"validation.seeds <= {(budget - search) // self.validation.candidates}")
+        return fits
+
+    def _what_fits(self, needed: int) -> str:
+        ga, budget = self.ga, self.budget
+        fits = self.fits_within(budget)
+        hint = ("; within it: " + ", or ".join(fits)) if fits else ""
+        return (
+            f"budget = {budget} simulations cannot hold the search ((ga.population {ga.population} + "
+            f"ga.offspring {ga.offspring} x ga.generations {ga.generations}) x replicates "
+            f"{self.replicates} = {self.search_simulations()}) and the validation (validation.seeds "
+            f"{self.validation.seeds} x validation.candidates {self.validation.candidates} = "
+            f"{self.validation.simulations()}): {needed} are needed{hint}, or raise budget to {needed}"
+        )
+
+    def validity_warning(self) -> str | None:
+        """A warning when the E bounds reach below the E at which the contact model's overlap
+        limit is likely exceeded at insertion (``dem.scenarios.feeder.softest_valid_E``)."""
+        return _validity_warning(json.dumps(self.scenario, sort_keys=True), self.parameters.model_dump_json())
+
     @field_validator("scenario")
     @classmethod
-    def _feeder_config(cls, scenario: dict[str, Any]) -> dict[str, Any]:
-        from dem.scenarios.feeder import FeederConfig
+    def _scenario_config(cls, scenario: dict[str, Any]) -> dict[str, Any]:
+        """Validated by its kind's model (a discriminated union on ``kind`` through the registry)."""
+        from dem.scenarios.registry import ScenarioConfigError, validate_config
 
         try:
-            return FeederConfig.model_validate(scenario).model_dump(mode="json")
-        except ValidationError as exc:
-            problems = "; ".join(
-                f"scenario.{'.'.join(str(part) for part in err['loc'])}: {err['msg']}" for err in exc.errors()
+            return validate_config(scenario)
+        except ScenarioConfigError as exc:
+            raise ValueError(str(exc)) from None
+
+    @model_validator(mode="after")
+    def _target_computable(self) -> StudyDefinition:
+        """The driver computes with the target at every batch: a measurement it cannot aggregate
+        and round (1e308 overflows the rounding) is refused here, not found out mid-study."""
+        measured = self.experiment.measured
+        if any(abs(value) > MAX_MEASURED for value in measured):
+            raise ValueError(
+                f"experiment.measured: {measured} holds a value above {MAX_MEASURED:g}; measured "
+                "values are counts or angles"
             )
-            raise ValueError(problems) from None
+        try:
+            self.experiment.target()
+        except (ArithmeticError, ValueError) as exc:
+            message = f"experiment.measured: no target can be computed from {measured} ({exc})"
+            raise ValueError(message) from None
+        return self
 
     def total_simulations(self) -> int:
-        """The budget: every individual x replicates, plus the final re-evaluation's upper bound."""
-        return self.ga.individuals() * self.replicates + self.reevaluation_upper_bound()
+        """The budget: the most simulations the study runs (search, extra replicates, validation)."""
+        return int(self.budget)
 
-    def reevaluation_upper_bound(self) -> int:
-        return self.ga.individuals() * self.elite_reevaluation
+    def search_simulations(self) -> int:
+        """Every individual of the GA with its replicates."""
+        return self.ga.individuals() * self.replicates
+
+    def replicate_pool(self) -> int:
+        """Simulations left for extra replicates of promising sets."""
+        return self.total_simulations() - self.search_simulations() - self.validation.simulations()
+
+    # The phases of a study, as batch indices: 0 .. G the GA's generations (each may carry extra
+    # replicates of earlier sets), G + 1 the last extra replicates, G + 2 the validation.
+    def replicate_batch(self) -> int:
+        return self.ga.generations + 1
+
+    def validation_batch(self) -> int:
+        return self.ga.generations + 2
+
+    def phase(self, batch: int) -> str:
+        """'search', 'replicates' or 'validation': what a batch (a trial's generation) is."""
+        if batch <= self.ga.generations:
+            return "search"
+        return "replicates" if batch == self.replicate_batch() else "validation"
 
     def n_items(self) -> int:
-        """Items in the scenario: the worst possible N_t, used to penalise failed simulations."""
-        from dem.scenarios.feeder import FeederConfig
+        """What the first experiment's response counts as for a failed simulation (the feeder:
+        every item retained); f1 of a failed individual with one experiment."""
+        from dem.scenarios.registry import for_config
 
-        return sum(FeederConfig.model_validate(self.scenario).items.counts.values())
+        failed = for_config(self.scenario).failed_responses(self.scenario)
+        return failed[self.experiments[0].response]
+
+    def failed_responses(self) -> dict[str, float]:
+        """Every response's value for a failed simulation."""
+        from dem.scenarios.registry import for_config
+
+        return for_config(self.scenario).failed_responses(self.scenario)
+
+
+@functools.lru_cache(maxsize=64)
+def _validity_warning(scenario_json: str, parameters_json: str) -> str | None:
+    from dem.scenarios.feeder import FeederConfig, softest_valid_E
+
+    parameters = Parameters.model_validate_json(parameters_json)
+    try:
+        config = FeederConfig.model_validate(json.loads(scenario_json))
+    except ValueError:
+        return None  # not the feeder: its insertion drop is what the estimate knows
+    if parameters.E is None or parameters.e is None:
+        return None
+    E, e = parameters.E, parameters.e
+    e_low, e_high = (e.fixed, e.fixed) if e.fixed is not None else (e.low, e.high)
+    E_low, E_high = (E.fixed, E.fixed) if E.fixed is not None else (E.low, E.high)
+    elastic = softest_valid_E(config, e_high)  # the least damped impact goes deepest
+    damped = softest_valid_E(config, e_low)
+    if E_low >= elastic:
+        return None
+    basis = (
+        "estimated from the insertion drop of the heaviest item against the overlap limit of the "
+        "linear contact model; such runs end 'invalid' and count as constraint violations"
+    )
+    if E_high < damped:
+        return (
+            f"parameters.E lies entirely below about {damped:.2g} Pa, where runs are expected to be "
+            f"invalid even at e = {e_low:g} ({basis}); raise parameters.E above {elastic:.2g} Pa"
+        )
+    if E.fixed is not None:
+        share = "the fixed E"
+    else:
+        span = math.log10(E_high / E_low)
+        below = (math.log10(min(elastic, E_high) / E_low) / span) if span > 0 else 1.0
+        share = f"{below:.0%} of the E range (log scale)"
+    return (
+        f"parameters.E reaches down to {E_low:.3g} Pa: below about {elastic:.2g} Pa (e = {e_high:g}; "
+        f"{damped:.2g} Pa at e = {e_low:g}) runs are likely to be invalid, {share} ({basis})"
+    )
 
 
 def aggregate(values: list[float], how: str) -> float:
@@ -276,9 +550,14 @@ def parse_study(data: dict[str, Any], base_dir: Path | None = None) -> StudyDefi
             path = (base_dir or Path.cwd()) / path
         if not path.is_file():
             raise StudyDefinitionError(f"scenario_path: no such file {path}")
-        from dem.scenarios.feeder import load_feeder_config
+        from dem.scenarios.registry import load_config_file
 
-        data["scenario"] = load_feeder_config(path).model_dump(mode="json")
+        data["scenario"] = load_config_file(path).model_dump(mode="json")
+    options = data.get("engine_options")
+    if isinstance(options, dict) and isinstance(options.get("template"), str):
+        template = Path(options["template"])
+        if not template.is_absolute():
+            data["engine_options"] = {**options, "template": str((base_dir or Path.cwd()) / template)}
     return StudyDefinition.model_validate(data)
 
 
@@ -301,11 +580,14 @@ def load_study_file(path: str | Path) -> StudyDefinition:
 
 
 def describe_validation_error(exc: ValidationError) -> str:
-    """pydantic's errors as one line per field, in the study file's own key names."""
+    """pydantic's errors as one line per field, in the study file's own key names; an unknown key
+    names the nearest valid one."""
+    from dem.scenarios.base import error_message
+
     problems = []
     for err in exc.errors():
         where = ".".join(str(part) for part in err["loc"])
-        message = err["msg"].removeprefix("Value error, ")
+        message = error_message(err, StudyDefinition)
         problems.append(message if not where or message.startswith(where) else f"{where}: {message}")
     return "; ".join(problems)
 
@@ -319,8 +601,14 @@ def check_limits(definition: StudyDefinition, *, max_population: int, max_simula
         )
     total = definition.total_simulations()
     if total > max_simulations:
+        needed = definition.search_simulations() + definition.validation.simulations()
+        if needed <= max_simulations:
+            advice = f"set budget <= {max_simulations}"
+        else:
+            advice = ", or ".join(definition.fits_within(max_simulations)) or "make the study smaller"
         raise StudyLimitError(
-            f"the study needs up to {total} simulations ((ga.population + ga.offspring x "
-            f"ga.generations) x (replicates + elite_reevaluation)); this service allows "
-            f"{max_simulations} (DEMCAL_MAX_SIMULATIONS)"
+            f"the study needs up to {total} simulations (search {definition.search_simulations()}, "
+            f"extra replicates {definition.replicate_pool()}, validation "
+            f"{definition.validation.simulations()}); this service allows {max_simulations} "
+            f"(DEMCAL_MAX_SIMULATIONS): {advice}"
         )

@@ -14,6 +14,11 @@ import pytest
 
 DEFAULT_TEST_DATABASE_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 DEFAULT_TEST_REDIS_URL = "redis://127.0.0.1:6379/13"
+# The fields of a SimulationResult that depend only on the parameters and the seed (not on the
+# machine, the worker or the run's history): two runs of one spec agree on all of them.
+DETERMINISTIC_RESULT_FIELDS = frozenset(
+    {"status", "n_items", "n_remaining", "discharge_times", "emptied_at", "sim_time", "steps", "cost"}
+)
 
 
 def _in_ci() -> bool:

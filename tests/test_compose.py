@@ -53,11 +53,11 @@ def resolve(words: list[str]):
     return command
 
 
-def test_compose_has_the_five_services(services):
-    assert set(services) == {"api", "worker", "redis", "postgres", "migrate"}
+def test_compose_has_the_six_services(services):
+    assert set(services) == {"api", "worker", "worker-liggghts", "redis", "postgres", "migrate"}
 
 
-@pytest.mark.parametrize("name", ["api", "worker", "migrate"])
+@pytest.mark.parametrize("name", ["api", "worker", "worker-liggghts", "migrate"])
 def test_each_demcal_service_runs_a_command_that_exists(services, name):
     words = command_words(services[name])
 
@@ -69,7 +69,7 @@ def test_each_demcal_service_runs_a_command_that_exists(services, name):
         assert option in {opt for param in command.params for opt in param.opts}, option
 
 
-@pytest.mark.parametrize("name", ["api", "worker", "migrate"])
+@pytest.mark.parametrize("name", ["api", "worker", "worker-liggghts", "migrate"])
 def test_each_demcal_variable_is_a_setting(services, name):
     variables = services[name].get("environment", {})
 
@@ -112,8 +112,9 @@ def test_the_migration_is_a_one_shot_db_upgrade(services):
     assert migrate["depends_on"]["postgres"]["condition"] == "service_healthy"
 
 
-def test_workers_are_scalable_need_only_redis_and_get_time_to_finish_a_trial(services):
-    worker = services["worker"]
+@pytest.mark.parametrize("name", ["worker", "worker-liggghts"])
+def test_workers_are_scalable_need_only_redis_and_get_time_to_finish_a_trial(services, name):
+    worker = services[name]
 
     assert command_words(worker)[:2] == ["demcal", "worker"]
     assert "container_name" not in worker
@@ -156,9 +157,21 @@ def test_the_dockerfile_installs_demcal_on_python_311_slim_as_a_non_root_user():
     lines = [line.strip() for line in (ROOT / "Dockerfile").read_text().splitlines()]
     instructions = [line for line in lines if line and not line.startswith("#")]
 
-    assert instructions[0] == "FROM python:3.11-slim"
+    assert instructions[0].startswith("FROM python:3.11-slim")
     assert any(re.search(r"pip install (--\S+ )*\.(\s|$)", line) for line in instructions)
     users = [line.split()[1] for line in instructions if line.startswith("USER ")]
     assert users and users[-1] not in ("root", "0")
     copied = {line.split()[1] for line in instructions if line.startswith("COPY ")}
     assert {"api", "worker", "dem", "optimizer", "migrations"} <= copied
+
+
+def test_the_liggghts_workers_image_adds_debians_liggghts_to_the_same_image(services):
+    worker = services["worker-liggghts"]
+    assert worker["build"] == {"context": ".", "target": "liggghts"}
+    assert worker["image"] != services["worker"]["image"]
+    text = (ROOT / "Dockerfile").read_text()
+    stage = text.split("FROM demcal AS liggghts", 1)[1].split("\nFROM ", 1)[0]
+    assert "apt-get install -y --no-install-recommends liggghts" in stage
+    assert [line for line in stage.splitlines() if line.startswith("USER ")][-1] == "USER demcal"
+    # The default target stays the plain image: the last stage is demcal itself.
+    assert [line for line in text.splitlines() if line.startswith("FROM ")][-1] == "FROM demcal"

@@ -1,11 +1,13 @@
 """The job function: one trial in, one simulation result out, as plain JSON-able dicts.
 
 ``run_trial(spec)`` is what every executor runs (the local process pool, the RQ worker through
-``worker/rq_job.py``). ``spec`` is a ``TrialSpec`` as a dict: the feeder scenario inline, the
-contact parameters, the seed, an optional wall-clock limit. It never raises: a bad scenario, an
-exception in the engine, or anything else becomes a result with status ``error`` and a message,
-so one bad simulation never takes a study or a worker down. Only ``BaseException``s that are not
-``Exception`` (KeyboardInterrupt, SystemExit) pass through: they mean the process is stopping.
+``worker/rq_job.py``). ``spec`` is a ``TrialSpec`` as a dict: the scenario config inline (its
+``kind`` finds the scenario in ``dem.scenarios.registry``), the contact parameters, the seed, an
+optional wall-clock limit, and optionally ``engine`` / ``engine_options`` (``dem/engines``). It
+never raises: a bad scenario, an exception in the engine, or anything else becomes a result with
+status ``error`` and a message, so one bad simulation never takes a study or a worker down.
+Only ``BaseException``s that are not ``Exception`` (KeyboardInterrupt, SystemExit) pass
+through: they mean the process is stopping.
 
 Must not: open a database, talk to Redis, or know about studies beyond the spec it is handed.
 """
@@ -39,22 +41,27 @@ def run_trial(
     params = spec.get("params") or {}
     seed = spec.get("seed", 0)
     try:
-        from dem.scenarios.feeder import FeederConfig, run_feeder
+        from dem.engines.base import DEFAULT_ENGINE, run_scenario
+        from dem.scenarios.base import RunControl
+        from dem.scenarios.registry import for_config
 
-        config = FeederConfig.model_validate(spec["scenario"])
+        scenario = for_config(spec["scenario"])
         timeout_s = spec.get("timeout_s")
-        deadline = started + float(timeout_s) if timeout_s else None
-        snapshot_dir = None
-        if spec.get("keep_snapshots") and snapshot_root is not None:
-            snapshot_dir = Path(snapshot_root) / str(spec["trial_id"])
-        result = run_feeder(
-            config,
-            dict(params),
-            int(seed),
-            deadline=deadline,
+        control = RunControl(
+            deadline=started + float(timeout_s) if timeout_s else None,
             should_stop=should_stop,
             progress=progress,
-            snapshot_dir=snapshot_dir,
+        )
+        if spec.get("keep_snapshots") and snapshot_root is not None:
+            control.snapshot_dir = Path(snapshot_root) / str(spec["trial_id"])
+        result = run_scenario(
+            scenario,
+            spec["scenario"],
+            dict(params),
+            int(seed),
+            control,
+            engine=spec.get("engine") or DEFAULT_ENGINE,
+            options=spec.get("engine_options"),
         )
     except Exception as exc:  # the contract: a result, never a traceback
         logger.exception("trial %s failed before or inside the simulation", spec.get("trial_id"))
@@ -79,10 +86,24 @@ def _floats(params: dict[str, Any]) -> dict[str, float]:
 
 
 def longest_first(specs: Sequence[Any]) -> list[Any]:
-    """Trial specs in the order executors should start them: the stiffest E first.
+    """Trial specs in the order executors should start them: the largest estimated cost first.
 
-    The automatic step scales as 1/sqrt(E), so a stiffer trial takes more steps. Starting the
-    longest trials first (LPT scheduling) keeps a generation from ending with one long trial
-    running alone while the other workers idle. With a forced step the order is neutral.
+    The scenario estimates each trial's body-steps (``Scenario.cost_estimate``): the automatic
+    step scales as 1/sqrt(E), so a stiffer trial takes more steps. Starting the longest trials
+    first (LPT scheduling) keeps a generation from ending with one long trial running alone while
+    the other workers idle. Equal estimates (a forced step) go stiffest first, as before.
     """
-    return sorted(specs, key=lambda spec: -float(spec.params.get("E", 0.0)))
+    def key(spec: Any) -> tuple[float, float]:
+        return -estimated_cost(spec.scenario, spec.params), -float(spec.params.get("E", 0.0))
+
+    return sorted(specs, key=key)
+
+
+def estimated_cost(scenario: dict[str, Any], params: dict[str, float]) -> float:
+    """The scenario's body-steps estimate; 0 for a config that does not validate (it will fail fast)."""
+    from dem.scenarios.registry import for_config
+
+    try:
+        return for_config(scenario).cost_estimate(scenario, params)
+    except Exception:
+        return 0.0

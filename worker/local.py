@@ -10,6 +10,8 @@ corrupt it, and this executor does kill processes:
 - deadlines: ``run_feeder`` ends a run with ``timeout`` once the spec's ``timeout_s`` has passed
   (checked between chunks); if a process is still busy ``grace_s`` after that, it is killed and
   the trial reported as ``timeout``;
+- warm-up: a new process runs ``worker.warmup.warm_up`` before its first trial, so no trial's T
+  includes the kernels' compile (its first trial's hard deadline allows for it);
 - a process that dies (segfault in a kernel, out of memory) reports its trial as ``error`` with
   the exit code, and is replaced.
 
@@ -44,6 +46,9 @@ logger = logging.getLogger(__name__)
 # How long a worker may overrun its trial's deadline before it is killed: the feeder checks its
 # deadline between chunks of simulated time, so a healthy run stops well within this.
 DEFAULT_GRACE_S = 30.0
+# A new process warms its kernels (``worker/warmup.py``) before it reads its first trial, which
+# waits in the pipe meanwhile: that trial's hard deadline allows for it.
+WARMUP_ALLOWANCE_S = 120.0
 # Longest single wait, so that hard deadlines are checked even when no result arrives.
 MAX_WAIT_S = 0.5
 
@@ -57,7 +62,9 @@ def _serve(conn, log_level: int, snapshot_root: Path | None) -> None:
         level=log_level, format="%(asctime)s %(levelname)-7s %(name)s[%(process)d]: %(message)s"
     )
     from worker.jobs import run_trial
+    from worker.warmup import warm_up
 
+    warm_up()  # before the first trial, so that no trial's T includes the compile
     while True:
         try:
             spec = conn.recv()
@@ -74,6 +81,7 @@ class _Slot:
     conn: Any
     spec: TrialSpec | None = None
     started: float = 0.0
+    trials: int = 0  # trials handed to this process; the first waits for its warm-up
 
     @property
     def name(self) -> str:
@@ -82,7 +90,8 @@ class _Slot:
     def hard_deadline(self, grace_s: float) -> float | None:
         if self.spec is None or self.spec.timeout_s is None:
             return None
-        return self.started + self.spec.timeout_s + grace_s
+        warming = WARMUP_ALLOWANCE_S if self.trials == 1 else 0.0
+        return self.started + self.spec.timeout_s + grace_s + warming
 
 
 class LocalPoolExecutor:
@@ -173,6 +182,7 @@ class LocalPoolExecutor:
                 slot = self._start()
             spec = self._waiting.popleft()
             slot.spec, slot.started = spec, time.monotonic()
+            slot.trials += 1
             slot.conn.send(asdict(spec))
 
     def _start(self) -> _Slot:

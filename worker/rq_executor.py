@@ -9,7 +9,7 @@ Decisions, and why:
 * **Job id = trial id** (``optimizer.protocols.trial_id``: study, individual, replicate), so a
   re-submitted trial is the same job, and RQ's registries speak in trial ids.
 * **Job timeout** (RQ's hard kill) comes from the spec's own deadline when it has one, otherwise
-  from the scenario's simulated duration and an estimate of its time step (``job_timeout``).
+  from the scenario's cost estimate in body-steps (``Scenario.cost_estimate``, ``job_timeout``).
 * **Retries only for infrastructure.** ``Retry(max=2)``: a job fails only when an exception
   escapes the simulation (a worker killed or lost, memory exhausted). An ``unstable`` or ``error``
   simulation is a result and is never retried (see ``worker/rq_job.py``). After the last retry the
@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict
@@ -46,10 +45,11 @@ from rq import Queue, Retry
 from rq.job import Job, JobStatus
 from rq.registry import FailedJobRegistry, StartedJobRegistry
 from rq.serializers import JSONSerializer
+from rq.worker import Worker
 
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import TrialOutcome, TrialSpec
-from worker.jobs import longest_first
+from worker.jobs import estimated_cost, longest_first
 from worker.rq_job import cancel_key, results_key
 
 logger = logging.getLogger(__name__)
@@ -82,43 +82,36 @@ class RedisQueueError(RuntimeError):
     """Redis cannot be reached or refused the queue's commands; the message says which URL."""
 
 
-def estimated_time_step(scenario: dict[str, Any], params: dict[str, float]) -> float:
-    """A rough time step for a feeder-like scenario: a fraction of the contact period of a
-    sphere of the smallest item's size, from E (``T_c = pi sqrt(m / K)``, ``K = E D / 2``).
-
-    Only used to size the job timeout, so it errs on the small side (more steps, longer timeout).
-    """
-    run = scenario.get("run", {}) or {}
-    if run.get("dt"):
-        return float(run["dt"])
-    fraction = float(run.get("dt_fraction", 0.05))
-    young = float(params.get("E", (scenario.get("params") or {}).get("E", 1e7)))
-    # A 10 mm steel-density sphere: smaller and denser than any item of the feeder's set, so the
-    # estimated step is shorter than the engine's and the timeout longer.
-    diameter, density = 0.01, 8000.0
-    mass = density * math.pi * diameter**3 / 6
-    stiffness = young * diameter / 2
-    return fraction * math.pi * math.sqrt(mass / stiffness)
-
-
 def job_timeout(spec: TrialSpec) -> int:
     """Seconds after which RQ kills the job: the spec's deadline with a margin, or an estimate
     from simulated duration x steps per second x items, bounded by a floor and a ceiling."""
     if spec.timeout_s:
         seconds = spec.timeout_s * DEADLINE_MARGIN + DEADLINE_GRACE_S
     else:
-        stages = spec.scenario.get("stages", {}) or {}
-        duration = float(stages.get("vibration_start", 5.0)) + float(stages.get("vibration_time", 60.0))
-        counts = (spec.scenario.get("items", {}) or {}).get("counts") or {"items": 30}
-        n_items = max(1, sum(int(count) for count in counts.values()))
-        steps = duration / estimated_time_step(spec.scenario, spec.params)
-        seconds = TIMEOUT_SAFETY * steps * n_items * STEP_COST_PER_ITEM_S
+        # The scenario's body-steps estimate (bodies x steps, from its own time step estimate).
+        seconds = TIMEOUT_SAFETY * estimated_cost(spec.scenario, spec.params) * STEP_COST_PER_ITEM_S
     return int(min(MAX_JOB_TIMEOUT_S, max(MIN_JOB_TIMEOUT_S, seconds)))
 
 
 def spec_to_payload(spec: TrialSpec) -> dict[str, Any]:
     """The job's argument: the whole spec, JSON-able, so the worker needs nothing else."""
     return asdict(spec)
+
+
+# Engines every worker has: their trials share the base queue. Any other engine has a queue of
+# its own, "<base>.<engine>", taken only by workers that have it (``engine_queues``).
+SHARED_ENGINES = frozenset({"numba", "command"})
+
+
+def engine_queue_name(base: str, engine: str) -> str:
+    """The queue a trial for ``engine`` goes to."""
+    return base if engine in SHARED_ENGINES else f"{base}.{engine}"
+
+
+def engine_queues(base: str, engines: Iterable[str]) -> list[str]:
+    """The queues a worker with these engines takes trials from: the engines' own, then the base."""
+    own = sorted({engine_queue_name(base, engine) for engine in engines} - {base})
+    return [*own, base]
 
 
 def _text(value: bytes | str) -> str:
@@ -138,6 +131,14 @@ class RqExecutor:
     ) -> None:
         self._redis = connection
         self._queue = Queue(queue_name, connection=connection, serializer=JSONSerializer)
+        from dem.engines.base import engine_names
+
+        # Every engine's queue, known from the start: a restarted service finds trials in any.
+        self._queues = {
+            engine: Queue(name, connection=connection, serializer=JSONSerializer)
+            for engine, name in ((e, engine_queue_name(queue_name, e)) for e in engine_names())
+        }
+        self._waiting: dict[str, str] = {}
         self._job_function = job_function
         self._max_retries = max_retries
         self._watched: set[str] = set()
@@ -179,27 +180,37 @@ class RqExecutor:
         )
         if not fresh:
             return
-        failed = FailedJobRegistry(queue=self._queue)
-        jobs = [
-            Queue.prepare_data(
-                self._job_function,
-                args=(spec_to_payload(spec),),
-                job_id=spec.trial_id,
-                timeout=job_timeout(spec),
-                result_ttl=RESULT_TTL_S,
-                failure_ttl=FAILURE_TTL_S,
-                description=f"demcal trial {spec.trial_id}",
-                meta={"study_id": spec.study_id, "max_retries": self._max_retries},
-                retry=Retry(max=self._max_retries) if self._max_retries else None,
-            )
-            for spec in fresh
-        ]
+        by_queue: dict[str, list[TrialSpec]] = {}
+        for spec in fresh:
+            by_queue.setdefault(self._queue_of(spec.engine).name, []).append(spec)
         with self._redis.pipeline() as pipe:
-            # A trial submitted again after it failed must not be reported failed again by poll.
-            pipe.zrem(failed.key, *[spec.trial_id for spec in fresh])
-            pipe.delete(*[cancel_key(spec.trial_id) for spec in fresh])
-            self._queue.enqueue_many(jobs, pipeline=pipe)
+            for name, group in by_queue.items():
+                queue = Queue(name, connection=self._redis, serializer=JSONSerializer)
+                jobs = [
+                    Queue.prepare_data(
+                        self._job_function,
+                        args=(spec_to_payload(spec),),
+                        job_id=spec.trial_id,
+                        timeout=job_timeout(spec),
+                        result_ttl=RESULT_TTL_S,
+                        failure_ttl=FAILURE_TTL_S,
+                        description=f"demcal trial {spec.trial_id}",
+                        # Results of every engine's queue go to the base queue's result lists.
+                        meta={
+                            "study_id": spec.study_id,
+                            "max_retries": self._max_retries,
+                            "results_queue": self._queue.name,
+                        },
+                        retry=Retry(max=self._max_retries) if self._max_retries else None,
+                    )
+                    for spec in group
+                ]
+                # A trial submitted again after it failed must not be reported failed again by poll.
+                pipe.zrem(FailedJobRegistry(queue=queue).key, *[spec.trial_id for spec in group])
+                pipe.delete(*[cancel_key(spec.trial_id) for spec in group])
+                queue.enqueue_many(jobs, pipeline=pipe)
             pipe.execute()
+        self._check_engines({spec.engine for spec in fresh})
         for spec in fresh:
             self._reported.discard(spec.trial_id)
             self._cancelled.discard(spec.trial_id)
@@ -233,23 +244,25 @@ class RqExecutor:
 
     def in_flight(self) -> set[str]:
         """Trial ids Redis still holds as work to do or a result to take (one atomic snapshot)."""
-        queue = self._queue
+        queues = self._all_queues()
         with self._redis.pipeline(transaction=True) as pipe:
-            pipe.lrange(queue.key, 0, -1)
-            pipe.lrange(queue.intermediate_queue_key, 0, -1)
-            pipe.zrange(StartedJobRegistry(queue=queue).key, 0, -1)
-            pipe.zrange(queue.scheduled_job_registry.key, 0, -1)
-            pipe.zrange(FailedJobRegistry(queue=queue).key, 0, -1)
+            for queue in queues:
+                pipe.lrange(queue.key, 0, -1)
+                pipe.lrange(queue.intermediate_queue_key, 0, -1)
+                pipe.zrange(StartedJobRegistry(queue=queue).key, 0, -1)
+                pipe.zrange(queue.scheduled_job_registry.key, 0, -1)
+                pipe.zrange(FailedJobRegistry(queue=queue).key, 0, -1)
             for study_id in sorted(self._watched):
-                pipe.lrange(results_key(queue.name, study_id), 0, -1)
+                pipe.lrange(results_key(self._queue.name, study_id), 0, -1)
             replies = pipe.execute()
         ids: set[str] = set()
-        for reply in replies[:2]:
-            ids.update(_text(job_id) for job_id in reply)
-        # Started entries are "<job id>:<execution id>"; trial ids contain no colon.
-        ids.update(_text(entry).split(":", 1)[0] for entry in replies[2])
-        for reply in replies[3:5]:
-            ids.update(_text(job_id) for job_id in reply)
+        for index, reply in enumerate(replies[: 5 * len(queues)]):
+            if index % 5 == 2:
+                # Started entries are "<job id>:<execution id>"; trial ids contain no colon.
+                ids.update(_text(entry).split(":", 1)[0] for entry in reply)
+            else:
+                ids.update(_text(job_id) for job_id in reply)
+        replies = [None] * 5 + replies[5 * len(queues) :]
         for reply in replies[5:]:
             ids.update(json.loads(envelope)["trial_id"] for envelope in reply)
         return ids
@@ -289,20 +302,55 @@ class RqExecutor:
     def maintain(self) -> None:
         """Move jobs whose worker stopped sending heartbeats (killed, machine lost) to a retry,
         or to the failed registry once retries are spent; ``poll`` then reports them."""
-        StartedJobRegistry(queue=self._queue).cleanup()
+        for queue in self._all_queues():
+            StartedJobRegistry(queue=queue).cleanup()
 
     def running(self) -> dict[str, str | None]:
         """Trial id -> name of the worker running it, for jobs a worker has started."""
-        registry = StartedJobRegistry(queue=self._queue)
-        trial_ids = [job_id for job_id, _ in registry.get_job_and_execution_ids(cleanup=False)]
+        trial_ids = [
+            job_id
+            for queue in self._all_queues()
+            for job_id, _ in StartedJobRegistry(queue=queue).get_job_and_execution_ids(cleanup=False)
+        ]
         jobs = Job.fetch_many(trial_ids, connection=self._redis, serializer=JSONSerializer)
         return {job.id: job.worker_name for job in jobs if job is not None}
 
     def queue_depth(self) -> int:
-        """Jobs waiting for a worker."""
-        return self._queue.count
+        """Jobs waiting for a worker, on every engine's queue."""
+        return sum(queue.count for queue in self._all_queues())
+
+    def waiting(self) -> dict[str, str]:
+        """Engine -> why its trials wait: no worker takes that engine's queue (checked on submit)."""
+        return dict(self._waiting)
 
     # -- internals ---------------------------------------------------------------------------
+
+    def _queue_of(self, engine: str) -> Queue:
+        if engine not in self._queues:  # an engine this service does not know: its own queue
+            self._queues[engine] = Queue(
+                engine_queue_name(self._queue.name, engine), connection=self._redis, serializer=JSONSerializer
+            )
+        return self._queues[engine]
+
+    def _all_queues(self) -> list[Queue]:
+        unique = {queue.name: queue for queue in [self._queue, *self._queues.values()]}
+        return list(unique.values())
+
+    def _check_engines(self, engines: Iterable[str]) -> None:
+        """Note engines whose queue no live worker takes: their trials wait, and say why. Every
+        worker has the shared engines, so their queue is only as idle as the service's workers."""
+        for engine in set(engines) - SHARED_ENGINES:
+            queue = self._queue_of(engine)
+            if Worker.count(queue=queue) > 0:
+                self._waiting.pop(engine, None)
+                continue
+            message = (
+                f"waiting for a worker with engine {engine!r}: no worker takes queue {queue.name!r} "
+                f"(start `demcal worker` on a machine where {engine} is installed)"
+            )
+            if self._waiting.get(engine) != message:
+                logger.warning("%s", message)
+            self._waiting[engine] = message
 
     def _job_statuses(self, trial_ids: Sequence[str]) -> dict[str, str | None]:
         with self._redis.pipeline(transaction=False) as pipe:
@@ -343,7 +391,12 @@ class RqExecutor:
 
     def _take_failed(self) -> list[TrialOutcome]:
         """Claim the watched studies' jobs that failed for good and turn them into error results."""
-        registry = FailedJobRegistry(queue=self._queue)
+        outcomes = []
+        for queue in self._all_queues():
+            outcomes += self._take_failed_from(FailedJobRegistry(queue=queue))
+        return outcomes
+
+    def _take_failed_from(self, registry: FailedJobRegistry) -> list[TrialOutcome]:
         job_ids = [_text(job_id) for job_id in self._redis.zrange(registry.key, 0, -1)]
         if not job_ids:
             return []

@@ -8,6 +8,8 @@ itself is ``worker.jobs.run_trial``; this module wraps it for RQ:
   delivered and the job succeeds, so RQ never retries physics;
 * only an exception escaping ``run_trial`` (a lost connection, memory exhausted, a bug) fails the
   job, and RQ retries it the bounded number of times the executor asked for;
+* Redis going away mid-trial (a restart) is infrastructure, never a result: the cancellation
+  check carries on, and delivery waits for Redis with backoff (``DELIVERY_PATIENCE_S``);
 * a cancelled trial (``RqExecutor.cancel`` sets its cancel key) stops between two chunks of the
   simulation and delivers a ``cancelled`` result, which the executor never reports;
 * the result is pushed onto the study's result list (``results_key``); the service's
@@ -26,14 +28,21 @@ import time
 from pathlib import Path
 from typing import Any
 
+import redis
 from rq import get_current_job
 from rq.job import Job
+
+from dem.scenarios import registry
 
 logger = logging.getLogger(__name__)
 
 # A result list nobody pops (its study was deleted while trials ran) must not stay in Redis for
 # ever; a week is far longer than any service outage we expect to ride out.
 RESULT_LIST_TTL_S = 7 * 24 * 3600
+# How long a finished trial waits for Redis to come back before its job fails (and is retried).
+DELIVERY_PATIENCE_S = 600.0
+# Redis away (restarting, network cut): infrastructure, never a trial's result.
+REDIS_OUTAGE = (redis.exceptions.ConnectionError, redis.exceptions.TimeoutError)
 
 
 def results_key(queue_name: str, study_id: str) -> str:
@@ -61,7 +70,10 @@ class CancellationCheck:
         now = time.monotonic()
         if not self._stopped and now >= self._next:
             self._next = now + self._every_s
-            self._stopped = bool(self._redis.exists(self._key))
+            try:
+                self._stopped = bool(self._redis.exists(self._key))
+            except REDIS_OUTAGE as exc:  # Redis restarting: go on, ask again at the next check
+                logger.warning("cancellation check: Redis unavailable (%s); the trial goes on", exc)
         return self._stopped
 
 
@@ -88,8 +100,12 @@ class ProgressLog:
             )
 
 
-def deliver(job: Job, spec: dict[str, Any], result: dict[str, Any]) -> None:
-    """Push one finished trial's result where the executor will take it."""
+def deliver(
+    job: Job, spec: dict[str, Any], result: dict[str, Any], patience_s: float = DELIVERY_PATIENCE_S
+) -> None:
+    """Push one finished trial's result where the executor will take it; while Redis is away
+    (restarting), retry with exponential backoff for up to ``patience_s`` rather than lose a
+    finished trial (after that the error escapes, the job fails and is retried)."""
     envelope = json.dumps(
         {
             "trial_id": spec["trial_id"],
@@ -98,11 +114,24 @@ def deliver(job: Job, spec: dict[str, Any], result: dict[str, Any]) -> None:
             "result": result,
         }
     )
-    key = results_key(job.origin, spec["study_id"])
-    with job.connection.pipeline() as pipe:
-        pipe.rpush(key, envelope)
-        pipe.expire(key, RESULT_LIST_TTL_S)
-        pipe.execute()
+    # An engine's own queue delivers to the base queue's list, which the service reads.
+    key = results_key(job.meta.get("results_queue") or job.origin, spec["study_id"])
+    wait, give_up = 0.5, time.monotonic() + patience_s
+    while True:
+        try:
+            with job.connection.pipeline() as pipe:
+                pipe.rpush(key, envelope)
+                pipe.expire(key, RESULT_LIST_TTL_S)
+                pipe.execute()
+            return
+        except REDIS_OUTAGE as exc:
+            if time.monotonic() + wait > give_up:
+                raise
+            logger.warning(
+                "trial %s: cannot deliver the result (%s); retrying in %.1f s", spec["trial_id"], exc, wait
+            )
+            time.sleep(wait)
+            wait = min(2 * wait, 30.0)
 
 
 def attempt(job: Job) -> int:
@@ -134,8 +163,11 @@ def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
         attempt(job),
     )
     started = time.perf_counter()
-    stages = spec["scenario"].get("stages") or {}
-    end = stages.get("vibration_start", 0.0) + stages.get("vibration_time", 0.0) if stages else None
+    try:
+        scenario = registry.for_config(spec["scenario"])
+        end = scenario.duration(spec["scenario"])
+    except Exception:  # an invalid config fails inside run_trial with a message
+        scenario, end = None, None
     result = run_trial(
         spec,
         should_stop=CancellationCheck(job, spec["trial_id"]),
@@ -144,11 +176,10 @@ def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
     )
     deliver(job, spec, result)
     logger.info(
-        "trial %s: %s, N_t=%s of %s, %.1f s wall%s",
+        "trial %s: %s, %s, %.1f s wall%s",
         spec["trial_id"],
         result.get("status"),
-        result.get("n_remaining"),
-        result.get("n_items"),
+        scenario.describe(result.get("responses") or {}, spec["scenario"]) if scenario else "-",
         time.perf_counter() - started,
         f" ({result['message']})" if result.get("message") else "",
     )

@@ -13,10 +13,18 @@
   the thread gets its turn). The entry expires ``3 x heartbeat_s`` after the last refresh
   (``get_heartbeat_ttl``; RQ's own grace is 60 s), so the service notices a worker killed with
   SIGKILL, or a machine lost, within seconds and runs its trial again.
+* Redis restarts: RQ's own dequeue loop waits for Redis, but an error anywhere else (the
+  suspension check, bookkeeping after a job) makes it quit. ``run_worker`` then waits for Redis
+  with backoff and works again under a derived name; the running trial's cancellation check and
+  result delivery ride the outage out (``worker/rq_job.py``).
 * Shutdown: the first SIGTERM or SIGINT is a *warm* shutdown: the worker takes no new job, lets
   the running trial finish and deliver its result, then exits 0. A trial can take minutes, so a
   supervisor must wait that long before it sends SIGKILL (compose: ``stop_grace_period``). A
   second signal is a cold shutdown: the running trial is killed and the service re-runs it.
+  RQ stops the trial by raising ``SystemExit`` from the signal handler, wherever the trial is;
+  a library that swallows it (trimesh imports its optional parts under ``except BaseException``,
+  and a trial's first clump imports them) would let the trial run on, so the process also ends
+  itself ``COLD_STOP_GRACE_S`` after a cold shutdown that has not unwound by then.
 * The job's argument carries the whole trial, so workers need only Redis: no database URL.
 
 Must not: open the database or drive studies; that is ``demcal serve``'s job.
@@ -28,6 +36,7 @@ import logging
 import os
 import socket
 import threading
+import time
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
@@ -38,9 +47,14 @@ from rq.job import Job
 from rq.serializers import JSONSerializer
 from rq.worker import WorkerStatus
 
+from worker.rq_job import REDIS_OUTAGE
+
 logger = logging.getLogger(__name__)
 
 DEFAULT_HEARTBEAT_S = 10
+# A cold shutdown unwinds in milliseconds (RQ marks the job failed, then the worker exits); past
+# this, the SystemExit was swallowed and the process ends without further ado.
+COLD_STOP_GRACE_S = 2.0
 
 
 class WorkerSetupError(RuntimeError):
@@ -50,8 +64,23 @@ class WorkerSetupError(RuntimeError):
 class DemcalWorker(SimpleWorker):
     """RQ's in-process worker, with heartbeats while a job runs and a short heartbeat grace."""
 
+    stop_asked = False  # a SIGTERM/SIGINT arrived: the end of the work is wanted, not an outage
+
+    def request_stop(self, signum, frame) -> None:
+        self.stop_asked = True
+        super().request_stop(signum, frame)
+
     def get_heartbeat_ttl(self, job: Job) -> int:
         return int(3 * self.job_monitoring_interval)
+
+    def request_force_stop(self, signum, frame) -> None:
+        try:
+            super().request_force_stop(signum, frame)  # raises SystemExit unless a duplicate signal
+        except SystemExit:
+            backstop = threading.Timer(COLD_STOP_GRACE_S, _exit_now, args=(self.name,))
+            backstop.daemon = True
+            backstop.start()
+            raise
 
     def execute_job(self, job: Job, queue: Queue) -> None:
         self.prepare_execution(job)
@@ -71,6 +100,12 @@ class DemcalWorker(SimpleWorker):
                 self.maintain_heartbeats(job)
             except Exception as exc:  # Redis briefly away, or the job ended under our feet
                 logger.warning("worker %s: heartbeat for %s failed: %s", self.name, job.id, exc)
+
+
+def _exit_now(name: str) -> None:
+    logger.warning("worker %s: cold shutdown not unwound after %g s; exiting now", name, COLD_STOP_GRACE_S)
+    logging.shutdown()
+    os._exit(1)
 
 
 def worker_name() -> str:
@@ -112,9 +147,14 @@ def build_worker(
 
 
 def preload() -> None:
-    """Import the simulation stack before the first job, so that its start-up is not a trial's."""
-    import dem.scenarios.feeder  # noqa: F401 - imported for its side effect: modules loaded
-    import worker.jobs  # noqa: F401
+    """Import the simulation stack (every built-in scenario) and warm its kernels before the first
+    job, so that neither start-up nor the compile is part of a trial's T (``worker/warmup.py``)."""
+    import worker.jobs  # noqa: F401 - imported for its side effect: modules loaded
+    from dem.scenarios import registry
+    from worker.warmup import warm_up
+
+    registry.kinds()  # imports every built-in scenario module
+    warm_up()
 
 
 def run_worker(
@@ -136,15 +176,49 @@ def run_worker(
     rq_job.SNAPSHOT_ROOT = snapshot_root
     connection = connect(redis_url)
     preload()
-    worker = build_worker(connection, queue_names, name=name, heartbeat_s=heartbeat_s)
-    logger.info(
-        "worker %s: listening on %s at %s (heartbeat %d s%s)",
-        worker.name,
-        ", ".join(queue_names),
-        connection.connection_pool.connection_kwargs.get("host", redis_url),
-        heartbeat_s,
-        ", burst" if burst else "",
-    )
-    worked = worker.work(burst=burst, logging_level=log_level, with_scheduler=False)
-    logger.info("worker %s: stopped", worker.name)
-    return worked
+    base_name = name or worker_name()
+    worked, incarnation = False, 0
+    while True:
+        # After an outage the worker comes back under a new name: RQ refuses to register a name
+        # whose previous registration it may still hold.
+        current = base_name if incarnation == 0 else f"{base_name}.{incarnation}"
+        worker = build_worker(connection, queue_names, name=current, heartbeat_s=heartbeat_s)
+        logger.info(
+            "worker %s: listening on %s at %s (heartbeat %d s%s)",
+            worker.name,
+            ", ".join(queue_names),
+            connection.connection_pool.connection_kwargs.get("host", redis_url),
+            heartbeat_s,
+            ", burst" if burst else "",
+        )
+        try:
+            worked = worker.work(burst=burst, logging_level=log_level, with_scheduler=False) or worked
+        except REDIS_OUTAGE as exc:  # raised from RQ's own start-up or tear-down
+            logger.warning("worker %s: Redis unavailable (%s)", worker.name, exc)
+        if burst or worker.stop_asked:
+            logger.info("worker %s: stopped", worker.name)
+            return worked
+        # Not asked to stop: RQ quit on an error, in practice Redis going away outside its
+        # dequeue loop (a restart). Wait for Redis with backoff and work again, so that a Redis
+        # restart never needs an operator.
+        logger.warning("worker %s: RQ stopped without being asked to; restarting it", worker.name)
+        time.sleep(1.0)
+        wait_for_redis(connection, worker.name)
+        incarnation += 1
+
+
+def redis_is_up(connection: Redis) -> bool:
+    try:
+        return bool(connection.ping())
+    except REDIS_OUTAGE:
+        return False
+
+
+def wait_for_redis(connection: Redis, name: str, first_s: float = 0.5, longest_s: float = 30.0) -> None:
+    """Block until Redis answers, retrying with exponential backoff (logged)."""
+    wait = first_s
+    while not redis_is_up(connection):
+        logger.warning("worker %s: Redis unavailable; retrying in %.1f s", name, wait)
+        time.sleep(wait)
+        wait = min(2 * wait, longest_s)
+    logger.info("worker %s: Redis is back; working again", name)

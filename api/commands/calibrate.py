@@ -7,9 +7,14 @@ shows the batch, trials done and running, the ETA and the best f1 so far; at the
 the Pareto front and the recommendation and writes ``<results>/<name>-<study id>/`` with
 ``trials.csv``, ``summary.json`` and ``pareto.png``.
 
-Ctrl-C stops the pool and leaves the study paused with every finished trial kept;
+Ctrl-C (or SIGTERM) stops the pool and leaves the study paused with every finished trial kept;
 ``--resume STUDY_ID`` continues it without re-running anything that finished, so the study ends
 with the same simulations as an uninterrupted run.
+
+One driver per study: ``calibrate`` takes the study's lease in the database, the one
+``demcal serve`` takes (``api/store/leases.py``), and renews it while it runs. ``--resume`` of a
+study another live process drives is refused (exit 2, naming it); a ``calibrate`` killed without
+a chance to pause loses the study to a ``serve`` replica once its lease expires.
 
 This module composes (settings, store, pool, driver) and reports; study logic lives in
 ``optimizer/``.
@@ -19,6 +24,8 @@ from __future__ import annotations
 
 import logging
 import math
+import signal
+import time
 from pathlib import Path
 
 import typer
@@ -27,6 +34,14 @@ logger = logging.getLogger(__name__)
 
 EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130
+
+
+class LeaseLost(RuntimeError):
+    """Another process holds the study's lease now; this one must stop driving it."""
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 def _fail(message: str) -> None:
@@ -54,8 +69,14 @@ def register(app: typer.Typer) -> None:
         settings = get_settings()
         definition = None if resume else _load(study_file)
         store = _open_store(settings.database_url)
-        study_id = _resume(store, resume) if resume else _create(store, definition)
-        _run(store, study_id, workers if workers is not None else settings.workers, results)
+        from api.store.leases import DatabaseLeases
+
+        leases = DatabaseLeases(store, ttl_s=settings.lease_ttl_s)
+        study_id = _resume(store, resume, leases) if resume else _create(store, definition, leases)
+        try:
+            _run(store, study_id, workers if workers is not None else settings.workers, results, leases)
+        finally:
+            leases.release(study_id)
 
 
 def _open_store(database_url: str):
@@ -78,16 +99,26 @@ def _load(study_file: Path | None):
         _fail(str(exc))
 
 
-def _create(store, definition) -> str:
+def _create(store, definition, leases) -> str:
+    experiments = definition.experiments
     study_id = store.create_study(definition.model_dump(mode="json"), None)
+    if not leases.acquire(study_id):  # a serve replica scanned in between: let it drive
+        _fail(f"study {study_id} was taken by `demcal serve` at once; follow it on the dashboard")
     typer.echo(
         f"study {study_id} ({definition.name}): up to {definition.total_simulations()} simulations, "
-        f"target N_t = {definition.experiment.target():g} +- {definition.experiment.tolerance:g}"
+        f"engine {definition.engine}, "
+        + "; ".join(f"target {x.response} = {x.target():g} +- {x.tolerance:g}" for x in experiments)
+        + f"; match: f1 ({definition.experiment.distance}) <= {definition.match_tolerance():g}, "
+        f"{definition.replicates} replicate(s) on common seeds, validation on "
+        f"{definition.validation.seeds} fresh seeds"
     )
+    warning = definition.validity_warning()
+    if warning:
+        typer.secho(f"warning: {warning}", err=True, fg="yellow")
     return study_id
 
 
-def _resume(store, study_id: str) -> str:
+def _resume(store, study_id: str, leases) -> str:
     from api.errors import NotFoundError
     from optimizer.protocols import StudyStatus
 
@@ -97,13 +128,20 @@ def _resume(store, study_id: str) -> str:
         _fail(f"no study {study_id!r} in this database; check DEMCAL_DATABASE_URL and the id")
     if study.status in (StudyStatus.DONE, StudyStatus.CANCELLED, StudyStatus.FAILED):
         _fail(f"study {study_id} is {study.status.value}; only a paused or running study can be resumed")
+    if not leases.acquire(study_id):
+        holder, until = leases.holder(study_id) or ("another process", None)
+        _fail(
+            f"study {study_id} is being driven by {holder} (its lease holds until {until:%H:%M:%S} "
+            "UTC and is renewed while it runs); pause it there, or let that process finish it"
+            if until else f"study {study_id} is being driven by another process"
+        )
     done = sum(record.result is not None for record in store.trials(study_id))
     store.set_status(study_id, StudyStatus.RUNNING, "resumed from the command line")
     typer.echo(f"resuming study {study_id}: {done} simulations already done are kept")
     return study_id
 
 
-def _run(store, study_id: str, workers: int, results: Path) -> None:
+def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
     from rich.console import Console
 
     from api.settings import get_settings
@@ -114,9 +152,25 @@ def _run(store, study_id: str, workers: int, results: Path) -> None:
     console = Console()
     executor = LocalPoolExecutor(workers, snapshot_root=get_settings().data_dir / "snapshots")
     driver = Driver(store, executor)
+    renewed = time.monotonic()
+
+    def on_progress(progress) -> None:
+        nonlocal renewed
+        live.update(progress)
+        if time.monotonic() - renewed >= leases.renew_every_s:
+            renewed = time.monotonic()
+            if not leases.renew(study_id):
+                raise LeaseLost(study_id)
+
+    # SIGTERM stops the run like Ctrl-C: the study is paused and the lease released, so no other
+    # process silently takes over a study its user stopped.
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         with _LiveProgress(console, executor) as live:
-            final = driver.run_to_completion(study_id, on_progress=live.update)
+            final = driver.run_to_completion(study_id, on_progress=on_progress)
+    except LeaseLost:
+        executor.close()
+        _fail(f"study {study_id} was taken over by another process (its lease expired while this one hung)")
     except KeyboardInterrupt:
         executor.close()
         message = f"interrupted; resume with: demcal calibrate --resume {study_id}"
@@ -193,7 +247,10 @@ def _report(console, store, study_id: str, results: Path) -> None:
     folder = results / f"{study.definition.get('name', 'study')}-{study_id}"
     summary = write_results(folder, study, records)
 
-    table = Table(title=f"Pareto front of {study_id} (f1 = |N_t - {summary['target']:g}|)")
+    experiments = study.definition.get("experiments") or [study.definition.get("experiment") or {}]
+    response = experiments[0].get("response") or "n_remaining"
+    rule = f"|{response} - {summary['target']:g}|" if len(experiments) == 1 else "max |x - target| / tol"
+    table = Table(title=f"Pareto front of {study_id} (f1 = {rule})")
     for column in (
         "individual",
         "gen",
@@ -201,8 +258,9 @@ def _report(console, store, study_id: str, results: Path) -> None:
         "nu",
         "e",
         "mu",
-        "N_t",
-        "f1",
+        "runs",
+        response,
+        "f1 [90 %]",
         f"f2 ({summary['objective_time']})",
     ):
         table.add_column(column, justify="right")
@@ -216,15 +274,17 @@ def _report(console, store, study_id: str, results: Path) -> None:
             f"{params['nu']:.3f}",
             f"{params['e']:.3f}",
             f"{params['mu']:.3f}",
-            ",".join(str(n) for n in member["n_remaining"]),
-            f"{member['f1']:g}",
+            str(len(member["trial_ids"])),
+            _n_t(member),
+            _f1(member),
             _figure(member["f2"]),
         )
     console.print(table)
+    _report_failures(console, summary["failures"])
     recommendation = summary["recommendation"]
     if recommendation is None:
         console.print(
-            f"[yellow]No parameter set reproduced N_t within +-{summary['tolerance']:g}[/] "
+            f"[yellow]No parameter set reproduced the experiments (f1 within {summary['tolerance']:g})[/] "
             f"(best f1 {summary['best_f1']}); widen the bounds, add generations or replicates."
         )
     else:
@@ -232,16 +292,129 @@ def _report(console, store, study_id: str, results: Path) -> None:
         console.print(
             f"[bold green]Recommended[/] (individual {recommendation['individual']}, fastest match): "
             f"{params}; "
-            f"N_t {recommendation['n_remaining']}, {recommendation['wall_time_s']:.1f} s wall"
+            f"{response} {recommendation['n_remaining']}, {recommendation['wall_time_s']:.1f} s wall"
         )
         for other in summary["equivalent"]:
             params = ", ".join(f"{name} = {value:.4g}" for name, value in other["params"].items())
             console.print(
                 f"  equivalent (individual {other['individual']}): {params}; f2 {_figure(other['f2'])}"
             )
+    _report_progress(console, summary["progress"], summary["identifiability"])
+    _validation_table(console, summary)
     first = summary["simulations_until_first_match"]
     matched = f"first match after {first}" if first is not None else "no match"
-    console.print(f"{summary['simulations']} simulations; {matched}. Results in {folder}/")
+    console.print(
+        f"{summary['simulations']} simulations ({summary['failures']['text']}); {matched}. "
+        f"Results in {folder}/"
+    )
+
+
+def _n_t(member: dict) -> str:
+    """N_t of a listed individual; a failed one shows how it failed, never a count."""
+    if member.get("failure"):
+        return f"[red]{member['failure'].split(':', 1)[0]}[/]"
+    return ",".join(str(n) for n in member["n_remaining"])
+
+
+def _f1(member: dict) -> str:
+    """f1 with its bootstrap interval over the replicates, where the summary carries one."""
+    interval = member.get("f1_interval")
+    if not interval or interval[0] == interval[1]:
+        return f"{member['f1']:g}"
+    return f"{member['f1']:.3g} [{interval[0]:.2g}-{interval[1]:.2g}]"
+
+
+def _report_failures(console, failures: dict) -> None:
+    """The runs that measured nothing, apart from the front: one row per status with its count
+    and the first such run's message (what to change)."""
+    if not failures["total"]:
+        console.print("failed: 0 (every simulation measured N_t)")
+        return
+    from rich.table import Table
+
+    table = Table(title=failures["text"] + ": not ranked, no N_t", title_justify="left")
+    table.add_column("status")
+    table.add_column("runs", justify="right")
+    table.add_column("first message", overflow="fold")
+    for status, count in failures["by_status"].items():
+        table.add_row(status, str(count), failures["first_message"].get(status, ""))
+    console.print(table)
+
+
+def _report_progress(console, progress: dict, identified: dict) -> None:
+    """Where the search got to (hypervolume, best f1, best validated f1 at the last batch) and
+    which parameters the experiment pins down."""
+    if progress["points"]:
+        last = progress["points"][-1]
+        hv = "-" if last["hypervolume"] is None else f"{last['hypervolume']:.3f}"
+        validated = last["best_validated_f1"]
+        console.print(
+            f"progress after {last['simulations']} simulations: hypervolume {hv} "
+            f"(reference f1 = {progress['reference']['f1']:g}, f2 = {progress['reference']['f2']:.3g}), "
+            f"best f1 {_optional(last['best_f1'])}, best validated f1 {_optional(validated)}",
+            soft_wrap=True,
+        )
+    if identified["parameters"]:
+        verdicts = ", ".join(
+            f"{entry['name']} {entry['verdict']} (total index {entry['total']:.2f}"
+            + _spread_text(entry["matching_spread"])
+            + ")"
+            for entry in identified["parameters"]
+        )
+        console.print(f"identifiability: {verdicts}", soft_wrap=True)
+    else:
+        console.print(f"identifiability: {identified.get('reason') or 'not available'}", soft_wrap=True)
+
+
+def _spread_text(spread: float | None) -> str:
+    return "" if spread is None else f", matching spread {spread:.2f}"
+
+
+def _optional(value: float | None) -> str:
+    return "-" if value is None else f"{value:g}"
+
+
+def _validation_table(console, summary: dict) -> None:
+    """The end of every study: each candidate's fresh-seed N_t against the experiment."""
+    from rich.table import Table
+
+    rows = summary.get("validation") or []
+    if not rows:
+        if summary.get("validation_status"):
+            console.print(f"Recommendation {summary['validation_status']}.")
+        return
+    measured = summary["measured"]
+    table = Table(
+        title=f"Validation on fresh seeds (experiment: median {_median(measured):g}, N_t {measured})"
+    )
+    for column in ("individual", "E [Pa]", "e", "mu", "search f1", "fresh N_t", "median [90 %]",
+                   "W1", "f1 [90 %]", "verdict"):  # fmt: skip
+        table.add_column(column, justify="right")
+    for row in rows:
+        params = row["params"]
+        median = "-" if row["median"] is None else f"{row['median']:g} [{_span(row['median_interval'])}]"
+        f1 = "-" if row["f1"] is None else f"{row['f1']:.2f} [{_span(row['f1_interval'])}]"
+        fresh = ",".join(str(n) for n in row["n_remaining"]) + (
+            f" +{len(row['failures'])} failed" if row["failures"] else ""
+        )
+        colour = "green" if row["verdict"] == "validated" else "red"
+        table.add_row(
+            str(row["individual"]), f"{params['E']:.3g}", f"{params['e']:.3f}", f"{params['mu']:.3f}",
+            f"{row['search_f1']:.2f}", fresh, median, "-" if row["w1"] is None else f"{row['w1']:.2f}",
+            f1, f"[{colour}]{row['verdict']}[/]",
+        )  # fmt: skip
+    console.print(table)
+    console.print(f"Recommendation: {summary['validation_status']} (the fastest validated set).")
+
+
+def _median(values: list[float]) -> float:
+    import statistics
+
+    return statistics.median(values)
+
+
+def _span(interval) -> str:
+    return "-" if interval is None else f"{interval[0]:.2g}-{interval[1]:.2g}"
 
 
 def _figure(value: float) -> str:

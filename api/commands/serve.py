@@ -1,6 +1,6 @@
 """``demcal serve``: the REST API, the dashboard and the study driver in one process.
 
-The driver runs in a background thread (``api/service.py``) on the RQ queue when
+The driver runs in a background thread (``api/driver_loop.py``) on the RQ queue when
 ``DEMCAL_REDIS_URL`` is set (trials run on ``demcal worker`` processes), otherwise on a local
 process pool. SIGTERM or Ctrl-C stops the server, lets the driver finish its current step and
 releases its studies' leases, so another replica can take them over at once.
@@ -8,7 +8,13 @@ releases its studies' leases, so another replica can take them over at once.
 
 from __future__ import annotations
 
+import signal
+
 import typer
+
+
+def _exit_cleanly(signum, frame) -> None:
+    raise SystemExit(0)
 
 
 def register(app: typer.Typer) -> None:
@@ -25,19 +31,24 @@ def register(app: typer.Typer) -> None:
 
         from api.app import create_app
         from api.db import SchemaOutOfDateError
-        from api.service import build_service
+        from api.driver_loop import build_driver_loop
         from api.settings import get_settings
         from worker.rq_executor import RedisQueueError
 
         settings = get_settings()
         try:
             application = create_app(settings)
-            service = build_service(settings, application.state.store) if driver else None
+            service = build_driver_loop(settings, application.state.store) if driver else None
         except (SchemaOutOfDateError, RedisQueueError) as exc:
             typer.secho(f"error: {exc}", err=True, fg="red")
             raise typer.Exit(2) from None
         if service is not None:
             service.start()
+        # uvicorn catches SIGTERM, shuts the server down, then raises the signal again with the
+        # handler it found: with the default one the process would die on the spot, before the
+        # ``finally`` below stops the driver and its local worker processes (which then kept
+        # computing as orphans). This handler turns that second delivery into a normal exit.
+        signal.signal(signal.SIGTERM, _exit_cleanly)
         try:
             uvicorn.run(
                 application,

@@ -1,13 +1,13 @@
-"""``demcal simulate``: run one feeder simulation from a TOML config, with a progress bar and a
-summary, or one JSON object for scripts.
+"""``demcal simulate``: run one simulation of any scenario from a TOML config (its ``kind``
+picks the scenario, ``--engine`` the engine), with a progress bar and a summary, or one JSON
+object (the whole ``SimulationResult``) for scripts.
 
-It parses and reports; the simulation itself is ``dem.scenarios.feeder.run_feeder``.
+It parses and reports; the run itself is ``dem.engines.base.run_scenario``.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 import tomllib
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import typer
 
-PARAMETER_NAMES = ("E", "nu", "e", "mu")
+from dem.parameters import PARAMETER_NAMES, range_problem
 
 
 class SetError(ValueError):
@@ -44,8 +44,9 @@ def split_sets(sets: list[str]) -> tuple[dict[str, float], dict[str, object]]:
                 value = float(text)
             except ValueError:
                 raise SetError(f"--set {key}={text}: {key} must be a number") from None
-            if not math.isfinite(value):
-                raise SetError(f"--set {key}={text}: {key} must be finite")
+            problem = range_problem(key, value)
+            if problem is not None:
+                raise SetError(f"--set {key}={text}: {problem}")
             params[key] = value
         elif "." in key:
             overrides[key] = _parse_value(text)
@@ -79,93 +80,101 @@ def _fail(message: str) -> None:
 def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate(
-        config_path: Path = typer.Argument(..., exists=True, dir_okay=False, help="Feeder config (TOML)."),
+        config_path: Path = typer.Argument(
+            ..., exists=True, dir_okay=False, help="Scenario config (TOML; kind = ... picks the scenario)."
+        ),
         sets: list[str] = typer.Option(
             [], "--set", help="E=5e6, nu=, e=, mu=, or a dotted config key (vibration.amplitude=2e-3)."
         ),
-        seed: int = typer.Option(0, "--seed", help="Seed of item shapes, positions and orientations."),
+        seed: int = typer.Option(0, "--seed", help="Seed of shapes, positions and orientations."),
+        engine: str = typer.Option("numba", "--engine", help="numba (built in) or liggghts."),
         as_json: bool = typer.Option(False, "--json", help="Print one JSON object and nothing else."),
         snapshots: Path | None = typer.Option(
-            None, "--snapshots", help="Write snapshots for `demcal render`."
+            None, "--snapshots", help="Write snapshots for `demcal render` (feeder)."
         ),
         vtk: Path | None = typer.Option(
-            None, "--vtk", help="Write VTK files for ParaView (spheres and tray) into this folder."
+            None, "--vtk", help="Write VTK files for ParaView (spheres and walls) into this folder."
         ),
         timeout: float | None = typer.Option(None, "--timeout", min=0, help="Give up after this many s."),
     ) -> None:
-        """Run one vibration feeder simulation and report N_t, discharge times and cost."""
+        """Run one simulation and report its responses, time and cost."""
         from pydantic import ValidationError
 
-        from dem.scenarios.feeder import FeederConfig, load_feeder_config, run_feeder
+        from dem.scenarios import registry
 
         try:
             params, overrides = split_sets(sets)
-            config = load_feeder_config(config_path)
+            config = registry.load_config_file(config_path)
+            scenario = registry.get(config.kind)
             if overrides:
-                data = apply_overrides(config.model_dump(mode="json"), overrides)
-                config = FeederConfig.model_validate(data)
+                config = scenario.config(apply_overrides(config.model_dump(mode="json"), overrides))
         except SetError as exc:
             _fail(str(exc))
+        except registry.UnknownScenarioError as exc:
+            _fail(f"{config_path}: kind: {exc}")
         except ValidationError as exc:
             _fail(f"{config_path}: {exc}")
         except (OSError, tomllib.TOMLDecodeError) as exc:
             _fail(f"{config_path}: {exc}")
 
+        from dem.engines.base import UnknownEngineError, get_engine
+
+        try:
+            get_engine(engine)
+        except UnknownEngineError as exc:
+            _fail(f"--engine: {exc}")
         deadline = time.monotonic() + timeout if timeout is not None else None
-        result = _run_with_progress(run_feeder, config, params, seed, deadline, snapshots, vtk, quiet=as_json)
+        result = _run_with_progress(scenario, config, engine, params, seed, deadline, snapshots, vtk, as_json)
         if as_json:
-            keys = (
-                "n_remaining", "n_items", "discharge_times", "emptied_at", "wall_time_s", "cost", "steps",
-                "dt", "sim_time", "status", "message", "params", "seed", "version",
-            )  # fmt: skip
-            dumped = result.model_dump(mode="json")
-            sys.stdout.write(json.dumps({key: dumped[key] for key in keys}) + "\n")
+            sys.stdout.write(json.dumps(result.model_dump(mode="json")) + "\n")
         else:
-            _print_summary(result)
+            _print_summary(scenario, result)
         if not result.ok:
             raise typer.Exit(1)
 
 
-def _run_with_progress(run_feeder, config, params, seed, deadline, snapshots, vtk, quiet):
+def _run_with_progress(scenario, config, engine, params, seed, deadline, snapshots, vtk, quiet):
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    end = config.stages.end
+    from dem.engines.base import run_scenario
+    from dem.scenarios.base import RunControl
+
+    end = scenario.duration(config) or 1.0
     columns = (
-        TextColumn("[bold]feeder"),
+        TextColumn(f"[bold]{scenario.kind}"),
         BarColumn(),
         TextColumn("{task.completed:6.2f} / {task.total:.2f} s simulated"),
-        TextColumn("{task.fields[left]} items left"),
+        TextColumn("{task.fields[count]} " + scenario.progress_label),
         TimeElapsedColumn(),
     )
     console = Console(stderr=True)
     with Progress(*columns, console=console, disable=quiet, transient=False) as bar:
-        task = bar.add_task("run", total=end, left="?")
+        task = bar.add_task("run", total=end, count="?")
 
-        def progress(t: float, left: int) -> None:
-            bar.update(task, completed=min(t, end), left=left)
+        def progress(t: float, count: int) -> None:
+            bar.update(task, completed=min(t, end), count=count)
 
-        return run_feeder(
-            config,
-            params,
-            seed,
-            deadline=deadline,
-            progress=progress,
-            snapshot_dir=snapshots,
-            vtk_dir=vtk,
-        )
+        control = RunControl(deadline=deadline, progress=progress, snapshot_dir=snapshots, vtk_dir=vtk)
+        return run_scenario(scenario, config, params, seed, control, engine=engine)
 
 
-def _print_summary(result) -> None:
+def _print_summary(scenario, result) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    table = Table("quantity", "value", title=f"feeder run: {result.status.value}")
-    table.add_row("N_t (items left in the tray)", f"{result.n_remaining} of {result.n_items}")
+    table = Table("quantity", "value", title=f"{scenario.kind} run ({result.engine}): {result.status.value}")
+    for response in scenario.responses:
+        value = result.responses.get(response.name)
+        shown = "-" if value is None else (f"{int(value)}" if response.integer else f"{value:.4g}")
+        unit = "" if response.unit == "1" else f" {response.unit}"
+        table.add_row(f"{response.name} ({response.description.rstrip('.')})", f"{shown}{unit}")
+    table.add_row("bodies", f"{result.n_items}")
     discharged = sorted(t for t in result.discharge_times if t is not None)
     if discharged:
         table.add_row("discharge times, s", f"first {discharged[0]:.2f}, last {discharged[-1]:.2f}")
-    table.add_row("tray emptied at, s", "-" if result.emptied_at is None else f"{result.emptied_at:.2f}")
+    if result.emptied_at is not None:
+        table.add_row("emptied at, s", f"{result.emptied_at:.2f}")
     table.add_row("simulated time, s", f"{result.sim_time:.3f}")
     table.add_row("wall time T, s", f"{result.wall_time_s:.1f}")
     table.add_row("steps / time step", f"{result.steps} / {result.dt:.3g} s")

@@ -16,7 +16,8 @@ def register(app: typer.Typer) -> None:
             None,
             "--queues",
             "-q",
-            help="Queues to take trials from, highest priority first (default: DEMCAL_QUEUE_NAME).",
+            help="Queues to take trials from, highest priority first (default: DEMCAL_QUEUE_NAME and "
+            "DEMCAL_QUEUE_NAME.<engine> for every engine installed here, e.g. .liggghts).",
         ),
         burst: bool = typer.Option(False, "--burst", help="Exit when the queues are empty."),
         name: str = typer.Option(None, "--name", help="Worker name (default: host.pid.tag)."),
@@ -31,13 +32,17 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Run trials from the queue. SIGTERM finishes the current trial, then exits."""
         from api.settings import get_settings
+        from dem.engines.base import available_engines
+        from worker.rq_executor import engine_queues
         from worker.runner import WorkerSetupError, run_worker
 
         settings = get_settings()
+        engines = available_engines()
+        typer.echo(f"engines here: {', '.join(engines)}", err=True)
         try:
             run_worker(
                 settings.redis_url,
-                queues or [settings.queue_name],
+                queues or engine_queues(settings.queue_name, engines),
                 burst=burst,
                 name=name,
                 heartbeat_s=heartbeat,

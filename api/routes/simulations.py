@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter, status
 
-from api.deps import ApiKeyDep, Limit, Offset, StoreDep
+from api.deps import ApiKeyDep, Limit, Offset, SettingsDep, StoreDep
 from api.schemas import SimulationCreate, SimulationPage, SimulationRead
 from api.services import simulations
 
@@ -12,9 +12,11 @@ router = APIRouter(prefix="/api/v1/simulations", tags=["simulations"])
 
 
 @router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=SimulationRead)
-def create_simulation(request: SimulationCreate, principal: ApiKeyDep, store: StoreDep):
+def create_simulation(
+    request: SimulationCreate, principal: ApiKeyDep, store: StoreDep, settings: SettingsDep
+):
     """Queue one simulation; poll GET /api/v1/simulations/{id} until its state is done."""
-    return simulations.create_simulation(store, request, principal)
+    return simulations.create_simulation(store, request, principal, data_dir=settings.data_dir)
 
 
 @router.get("", response_model=SimulationPage)

@@ -9,8 +9,16 @@ from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import StreamingResponse
 
 from api.deps import ApiKeyDep, Limit, Offset, SettingsDep, StoreDep, StudyViewsDep
-from api.schemas import GenerationSummary, ParetoFront, RecommendationRead, StudyPage, StudyRead
-from api.services import studies, trials
+from api.schemas import (
+    GenerationSummary,
+    IdentifiabilityRead,
+    ParetoFront,
+    RecommendationRead,
+    StudyPage,
+    StudyProgressRead,
+    StudyRead,
+)
+from api.services import progress, studies, trials
 from optimizer.protocols import StudyStatus
 from optimizer.study import StudyDefinition
 
@@ -21,7 +29,7 @@ def create_study(definition: StudyDefinition, principal: ApiKeyDep, store: Store
     """Create a study from a definition (the same document `demcal calibrate` reads)."""
     return studies.create_study(
         store, definition, principal, max_population=settings.max_population,
-        max_simulations=settings.max_simulations,
+        max_simulations=settings.max_simulations, data_dir=settings.data_dir,
     )
 
 
@@ -70,6 +78,19 @@ def pareto_front(study_id: str, principal: ApiKeyDep, store: StoreDep, views: St
 def generation_summary(study_id: str, principal: ApiKeyDep, store: StoreDep):
     """Median and spread of N_t and T per generation (the paper's Fig. 5)."""
     return trials.generation_summary(store, study_id, principal)
+
+
+@router.get("/{study_id}/progress", response_model=StudyProgressRead)
+def study_progress(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
+    """Hypervolume, best f1 and best validated f1 against simulations, one point per completed batch."""
+    return Response(progress.progress_json(store, views, study_id, principal), media_type="application/json")
+
+
+@router.get("/{study_id}/identifiability", response_model=IdentifiabilityRead)
+def identifiability(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
+    """Which searched parameters the experiment pins down, from the spread of the matching sets."""
+    body = progress.identifiability_json(store, views, study_id, principal)
+    return Response(body, media_type="application/json")
 
 
 @router.get("/{study_id}/recommendation", response_model=RecommendationRead)

@@ -1,7 +1,8 @@
 """Health and metrics: what an operator's probe and Prometheus scrape see.
 
 Health never raises: each dependency is reported ``ok`` or with the error's class and message, and
-the overall status is ``degraded`` if any is not ok. Metrics are Prometheus text format 0.0.4,
+the overall status is ``degraded`` (503) if any is not ok, or if jobs wait on the queue while no
+worker is registered (``problem`` says which). Metrics are Prometheus text format 0.0.4,
 computed from the database (the source of truth) and, when configured, the RQ queue's length.
 """
 
@@ -34,22 +35,33 @@ def health(store: SqlStore, settings: Settings) -> Health:
     except Exception as exc:  # noqa: BLE001 - a probe reports every failure, it never raises
         log.warning("health: database check failed: %s", exc)
         database = f"error: {exc.__class__.__name__}"
-    redis_state, workers = "not configured", None
+    redis_state, workers, queued = "not configured", None, None
     if settings.redis_url:
         try:
-            from rq import Worker
+            from rq import Queue, Worker
 
             connection = _redis(settings)
-            connection.ping()
-            workers = Worker.count(connection=connection)
+            try:
+                connection.ping()
+                workers = Worker.count(connection=connection)
+                queued = Queue(settings.queue_name, connection=connection).count
+            finally:
+                connection.close()
             redis_state = "ok"
         except Exception as exc:  # noqa: BLE001
             log.warning("health: redis check failed: %s", exc)
             redis_state = f"error: {exc.__class__.__name__}"
-    healthy = database == "ok" and redis_state in ("ok", "not configured")
+    problems = []
+    if database != "ok":
+        problems.append(f"database {database}")
+    if redis_state not in ("ok", "not configured"):
+        problems.append(f"redis {redis_state}")
+    if workers == 0 and queued:
+        # Work is waiting and nobody will do it: not ok, whatever the connections say.
+        problems.append(f"{queued} jobs queued and no worker running; start `demcal worker`")
     return Health(
-        status="ok" if healthy else "degraded", database=database, redis=redis_state, workers=workers,
-        version=__version__,
+        status="degraded" if problems else "ok", database=database, redis=redis_state, workers=workers,
+        queued=queued, problem="; ".join(problems) or None, version=__version__,
     )
 
 

@@ -1,32 +1,39 @@
 """Single simulations asked for through the API: validated and stored as ``pending``.
 
 The service's background loop (``demcal serve``) enqueues pending simulations and records their
-results through the store (see ``api/store.py``); this module only accepts and reads them.
+results through the store (see ``api/store/``); this module only accepts and reads them.
 """
 
 from __future__ import annotations
 
-from pydantic import ValidationError
+from pathlib import Path
 
 from api.auth import Principal
 from api.errors import InvalidInputError
 from api.schemas import SimulationCreate, SimulationPage, SimulationRead
+from api.services.scenario_paths import confine_paths
 from api.store import SqlStore
 
 
-def create_simulation(store: SqlStore, request: SimulationCreate, principal: Principal) -> SimulationRead:
-    from dem.scenarios.feeder import FeederConfig
+def create_simulation(
+    store: SqlStore, request: SimulationCreate, principal: Principal, *, data_dir: Path
+) -> SimulationRead:
+    from dem.engines.base import UnknownEngineError, refusal
+    from dem.scenarios.registry import ScenarioConfigError, for_config, validate_config
 
     try:
-        scenario = FeederConfig.model_validate(request.scenario).model_dump(mode="json")
-    except ValidationError as exc:
-        problems = "; ".join(
-            f"scenario.{'.'.join(str(p) for p in err['loc'])}: {err['msg'].removeprefix('Value error, ')}"
-            for err in exc.errors()
-        )
-        raise InvalidInputError(problems) from None
+        scenario = validate_config(request.scenario)
+        problem = refusal(request.engine, for_config(scenario), scenario)
+    except ScenarioConfigError as exc:
+        raise InvalidInputError(str(exc)) from None
+    except UnknownEngineError as exc:
+        raise InvalidInputError(f"engine: {exc}") from None
+    if problem:
+        raise InvalidInputError(f"engine: {problem}")
+    scenario = confine_paths(scenario, data_dir)
     sim_id = store.create_simulation(
-        scenario, dict(request.params), request.seed, principal.owner, timeout_s=request.timeout_s
+        scenario, dict(request.params), request.seed, principal.owner, timeout_s=request.timeout_s,
+        engine=request.engine,
     )
     return SimulationRead.model_validate(store.get_simulation(sim_id))
 

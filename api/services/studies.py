@@ -12,14 +12,21 @@ The driver loop, not this module, moves studies to running, done or failed.
 
 from __future__ import annotations
 
+import logging
+from pathlib import Path
+
 from api.auth import Principal
 from api.errors import ConflictError, InvalidInputError
-from api.schemas import Progress, StudyListItem, StudyPage, StudyRead, TrialRead
+from api.schemas import Failures, Progress, ResponseRead, StudyListItem, StudyPage, StudyRead
 from api.services.generations import latest_generation
+from api.services.scenario_paths import confine_paths
 from api.services.trials import trial_read
 from api.store import SqlStore
+from optimizer.outcomes import failures_from_counts
 from optimizer.protocols import StudyStatus, TrialState
 from optimizer.study import StudyDefinition, StudyLimitError, check_limits
+
+logger = logging.getLogger(__name__)
 
 TRANSITIONS: dict[str, tuple[tuple[StudyStatus, ...], StudyStatus]] = {
     "pause": ((StudyStatus.CREATED, StudyStatus.RUNNING), StudyStatus.PAUSED),
@@ -30,14 +37,31 @@ TRANSITIONS: dict[str, tuple[tuple[StudyStatus, ...], StudyStatus]] = {
 
 def create_study(
     store: SqlStore, definition: StudyDefinition, principal: Principal, *, max_population: int,
-    max_simulations: int,
+    max_simulations: int, data_dir: Path,
 ) -> StudyRead:
     try:
         check_limits(definition, max_population=max_population, max_simulations=max_simulations)
     except StudyLimitError as exc:
         raise InvalidInputError(str(exc)) from None
-    study_id = store.create_study(definition.model_dump(mode="json"), owner=principal.owner)
+    document = definition.model_dump(mode="json")
+    document["scenario"] = confine_paths(document["scenario"], data_dir)
+    study_id = store.create_study(document, owner=principal.owner)
     return get_study(store, study_id, principal)
+
+
+def _failures(status_counts: dict[str, int]) -> Failures:
+    counts = failures_from_counts(status_counts)
+    return Failures(**counts.as_json(), text=counts.text())
+
+
+def _warnings(definition: dict) -> list[str]:
+    """The study's warnings; an estimate that cannot be made (a user mesh missing here) is none."""
+    try:
+        warning = StudyDefinition.model_validate(definition).validity_warning()
+    except Exception:  # noqa: BLE001 - a warning must never turn a read into a 500
+        logger.warning("no validity estimate for this study's scenario", exc_info=True)
+        return []
+    return [warning] if warning else []
 
 
 def _budget(definition: dict) -> tuple[int, int]:
@@ -54,17 +78,21 @@ def get_study(store: SqlStore, study_id: str, principal: Principal) -> StudyRead
     counts = store.trial_state_counts(study_id)
     trials_total, generations_total = _budget(row.definition)
     best = store.best_trial(study_id)
+    failures = _failures(store.run_status_counts(study_id))
     return StudyRead(
         id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status), message=row.message,
         definition=row.definition,
         progress=Progress(
             trials_total=trials_total, trials_done=counts.get(TrialState.DONE.value, 0),
-            trials_by_state=counts, generation=latest_generation(row.generation),
+            trials_by_state=counts,
+            failures=failures,
+            generation=latest_generation(row.generation, generations_total),
             generations_total=generations_total,
         ),
         best=trial_read(best) if best is not None else None,
-        recommendation=row.recommendation, created_at=row.created_at, updated_at=row.updated_at,
-        started_at=row.started_at, finished_at=row.finished_at,
+        recommendation=row.recommendation, warnings=_warnings(row.definition),
+        created_at=row.created_at, updated_at=row.updated_at,
+        started_at=row.started_at, finished_at=row.finished_at, responses=declared_responses(row.definition),
     )
 
 
@@ -83,18 +111,19 @@ def list_studies(
     # One grouped query each for the whole page, not one per study.
     done = store.done_counts(ids)
     best_f1 = store.best_f1s(ids)
+    statuses = store.run_status_counts_many(ids)
     items = []
     for row in page.items:
         trials_total, generations_total = _budget(row.definition)
         items.append(
             StudyListItem(
                 id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status),
-                message=row.message, generation=latest_generation(row.generation),
+                message=row.message, generation=latest_generation(row.generation, generations_total),
                 trials_done=done.get(row.id, 0),
                 trials_total=trials_total, generations_total=generations_total,
                 created_at=row.created_at, updated_at=row.updated_at, started_at=row.started_at,
                 finished_at=row.finished_at, recommendation=_compact(row.recommendation),
-                best_f1=best_f1.get(row.id),
+                best_f1=best_f1.get(row.id), failures=_failures(statuses.get(row.id, {})),
             )
         )
     return StudyPage(items=items, total=page.total, limit=limit, offset=offset)
@@ -120,6 +149,15 @@ def delete_study(store: SqlStore, study_id: str, principal: Principal) -> None:
     store.delete_study(study_id)
 
 
-def best_trial_read(store: SqlStore, study_id: str) -> TrialRead | None:
-    best = store.best_trial(study_id)
-    return trial_read(best) if best is not None else None
+
+def declared_responses(definition: dict) -> list[ResponseRead]:
+    """What the study's scenario measures, with units (empty for a definition that no longer
+    validates, e.g. a scenario kind this server does not have)."""
+    from dem.scenarios.registry import UnknownScenarioError, for_config
+
+    scenario_config = definition.get("scenario") or {}
+    try:
+        scenario = for_config(scenario_config)
+        return [ResponseRead(**r.as_dict()) for r in scenario.declared(scenario_config)]
+    except (UnknownScenarioError, ValueError):
+        return []

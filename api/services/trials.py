@@ -6,6 +6,10 @@ The two reads every dashboard polls, the trial page and the Pareto front, return
 they are built from plain column rows and serialised once by pydantic, and the front is cached
 per study version (``api/services/views.py``). The routes still declare their response models.
 
+A run that measured nothing (``optimizer/outcomes.py``) is never sent as an N_t value or on the
+front: its ``n_remaining`` is null (the raw count stays in the trial's full result), its individual's
+objectives are null as stored, and summaries count it by status.
+
 It reads only; the optimiser (through the store) is the one that writes objectives and Pareto
 flags. Every function first checks that the caller may see the study (404 otherwise).
 """
@@ -35,13 +39,24 @@ from api.schemas import (
 from api.services.generations import latest_generation
 from api.services.views import StudyViewCache
 from api.store import SqlStore, TrialFilter
+from optimizer.outcomes import count_failures, individual_failures, is_failed, measured_n
 from optimizer.protocols import PARAMETER_NAMES, StudyStatus
 from optimizer.study import StudyDefinition
 
 CSV_COLUMNS = (
-    "trial_id", "generation", "individual", "replicate", "seed", *PARAMETER_NAMES, "state", "status",
-    "n_remaining", "wall_time_s", "cost", "f1", "f2", "pareto", "worker", "attempts", "message",
-)
+    "trial_id", "generation", "individual", "replicate", "seed", *PARAMETER_NAMES, "engine", "state",
+    "status", "wall_time_s", "cost", "f1", "f2", "failure", "pareto", "worker", "attempts", "message",
+)  # plus one column per response the study's scenario declares, after "status"
+
+
+def response_column(response) -> str:
+    """A response's CSV header: its name and unit, 'angle_deg [deg]' (a count has no unit)."""
+    return response.name if response.unit == "1" else f"{response.name} [{response.unit}]"
+
+
+def csv_columns(responses) -> tuple[str, ...]:
+    at = CSV_COLUMNS.index("status") + 1
+    return (*CSV_COLUMNS[:at], *(response_column(r) for r in responses), *CSV_COLUMNS[at:])
 
 
 def _objectives(row) -> tuple[float | None, float | None]:
@@ -54,7 +69,8 @@ def trial_read(row: TrialRow) -> TrialRead:
     f1, f2 = _objectives(row)
     return TrialRead(
         id=row.id, generation=row.generation, individual=row.individual, replicate=row.replicate,
-        seed=row.seed, params=row.params, state=row.state, status=row.status, n_remaining=row.n_remaining,
+        seed=row.seed, params=row.params, state=row.state, status=row.status,
+        n_remaining=measured_n(row.status, row.n_remaining), responses=row.responses, engine=row.engine,
         wall_time_s=row.wall_time_s, cost=row.cost, f1=f1, f2=f2, pareto=row.pareto, worker=row.worker,
         attempts=row.attempts, message=row.message, updated_at=row.updated_at,
     )
@@ -64,14 +80,16 @@ def _pareto_point(row) -> ParetoPoint:
     f1, f2 = _objectives(row)
     return ParetoPoint(
         id=row.id, generation=row.generation, individual=row.individual, replicate=row.replicate,
-        params=row.params, n_remaining=row.n_remaining, wall_time_s=row.wall_time_s, cost=row.cost,
-        f1=f1, f2=f2,
+        params=row.params, n_remaining=measured_n(row.status, row.n_remaining), responses=row.responses,
+        wall_time_s=row.wall_time_s,
+        cost=row.cost, f1=f1, f2=f2,
     )
 
 
 def _trial_item(row) -> dict:
     """A ``TrialRead`` as a dict, from a row of ``TRIAL_READ_COLUMNS``."""
     item = row._asdict()
+    item["n_remaining"] = measured_n(item["status"], item["n_remaining"])
     item["f1"] = _finite_objective(item.pop("f1_value"), item.pop("f1_kind"))
     item["f2"] = _finite_objective(item.pop("f2_value"), item.pop("f2_kind"))
     return item
@@ -125,11 +143,15 @@ def pareto_front_json(
     study = store.study_version(study_id, principal.visible_to)
 
     def build() -> bytes:
-        rows = store.pareto_columns(study_id)
+        rows = [row for row in store.pareto_columns(study_id) if not is_failed(row.status)]
         points = sorted(
-            (_pareto_point(row) for row in rows), key=lambda p: (_sort_key(p.f1), _sort_key(p.f2))
+            (point for point in map(_pareto_point, rows) if point.f1 is not None),
+            key=lambda p: (_sort_key(p.f1), _sort_key(p.f2)),
         )
-        front = ParetoFront(study_id=study_id, generation=latest_generation(study.generation), points=points)
+        generations = store.load_study(study_id).definition.get("ga", {}).get("generations")
+        front = ParetoFront(
+            study_id=study_id, generation=latest_generation(study.generation, generations), points=points
+        )
         return front.model_dump_json().encode()
 
     return views.get_or_build("pareto", study_id, (study.updated_at, study.generation), build)
@@ -156,13 +178,15 @@ def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> 
     summaries = []
     for generation, rows in sorted(by_generation.items()):
         done = [row for row in rows if row.state == "done"]
-        ok = [row for row in done if row.status == "ok"]
+        ok = [row for row in done if not is_failed(row.status)]
+        failed = count_failures(row.status for row in done)
         f1_values = [f1 for f1 in (_objectives(row)[0] for row in done) if f1 is not None]
         summaries.append(
             GenerationSummary(
                 generation=generation, trials=len(rows), done=len(done), ok=len(ok),
-                failed=len(done) - len(ok),
+                failed=failed.total, failed_by_status=failed.by_status,
                 n_remaining=_spread([row.n_remaining for row in ok if row.n_remaining is not None]),
+                responses=_response_spreads(ok),
                 wall_time_s=_spread([row.wall_time_s for row in ok if row.wall_time_s is not None]),
                 cost=_spread([row.cost for row in ok if row.cost is not None]),
                 best_f1=min(f1_values) if f1_values else None,
@@ -174,7 +198,7 @@ def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> 
 def recommendation(store: SqlStore, study_id: str, principal: Principal) -> RecommendationRead:
     study = store.get_study(study_id, principal.visible_to)
     try:
-        tolerance = StudyDefinition.model_validate(study.definition).experiment.tolerance
+        tolerance = StudyDefinition.model_validate(study.definition).match_tolerance()
     except ValueError:
         tolerance = 0.0
     matching: dict[int, ParetoPoint] = {}
@@ -191,18 +215,39 @@ def recommendation(store: SqlStore, study_id: str, principal: Principal) -> Reco
     )
 
 
+def _response_spreads(rows) -> dict[str, Spread]:
+    values: dict[str, list[float]] = {}
+    for row in rows:
+        for name, value in (row.responses or {}).items():
+            if value is not None:
+                values.setdefault(name, []).append(value)
+    return {name: _spread(found) for name, found in values.items()}
+
+
 def export_rows(store: SqlStore, study_id: str, principal: Principal) -> list[dict]:
-    store.get_study(study_id, principal.visible_to)
+    """Every trial as a flat row (CSV and JSON export): parameters, one column per declared
+    response (headed with its unit), time, cost and objectives."""
+    from api.services.studies import declared_responses
+
+    study = store.get_study(study_id, principal.visible_to)
+    declared = declared_responses(study.definition)
     rows = []
-    for row in store.trial_rows_for_export(study_id):
+    trial_rows = store.trial_rows_for_export(study_id)
+    failures = individual_failures((row.individual, row.replicate, row.status) for row in trial_rows)
+    for row in trial_rows:
         f1, f2 = _objectives(row)
+        measured = row.responses or {}
         rows.append(
             {
                 "trial_id": row.id, "generation": row.generation, "individual": row.individual,
                 "replicate": row.replicate, "seed": row.seed,
                 **{name: row.params.get(name) for name in PARAMETER_NAMES},
-                "state": row.state, "status": row.status, "n_remaining": row.n_remaining,
+                "engine": row.engine, "state": row.state, "status": row.status,
+                # Only runs that measured: a failed run's responses are not measurements.
+                **{response_column(r): measured.get(r.name) if row.status == "ok" else None
+                   for r in declared},
                 "wall_time_s": row.wall_time_s, "cost": row.cost, "f1": f1, "f2": f2,
+                "failure": failures.get(row.individual, ""),
                 "pareto": row.pareto, "worker": row.worker, "attempts": row.attempts,
                 "message": row.message,
             }
@@ -213,7 +258,8 @@ def export_rows(store: SqlStore, study_id: str, principal: Principal) -> list[di
 def export_csv(rows: list[dict]) -> Iterator[str]:
     """CSV text in chunks, so a large study streams instead of building one big string."""
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    columns = list(rows[0]) if rows else list(CSV_COLUMNS)
+    writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n")
     writer.writeheader()
     for index, row in enumerate(rows, start=1):
         writer.writerow({key: "" if value is None else value for key, value in row.items()})

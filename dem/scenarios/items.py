@@ -21,17 +21,23 @@ below come from manufacturers' published dimensions (width x height x depth) and
 Each mesh is one watertight solid (rounded slabs are convex hulls of corner cylinders; the camera
 is a manifold boolean union of slab and barrel), so mass properties come out right.
 
+Representation (``REPRESENTATIONS``): a rounded polyhedron (``dem/polyhedra.py``: flat faces,
+edges rounded by a quarter of the thinnest dimension; the camera's pieces are its known parts,
+slab and barrel) or a sphere clump of ``resolution`` spheres (``dem/clumping.py``).
+
 Per-item spread: every dimension and the mass of an item is the nominal one times an independent
 factor drawn uniformly from [1 - spread, 1 + spread], so no two items are identical. Fitting 30
-clumps would cost seconds per run, so the clump is fitted once per kind (and cached) and mapped
-to each item by ``dem.clumping.deform_clump`` (centres scaled with the mesh, radii by the smallest
-factor: the spheres stay inscribed); mass, centre of mass and inertia are those of the item's own
-mesh and mass. Draw the item set from a fixed generator if the same 30 "physical" items should be
-fed in every run, as in the experiment.
+clumps would cost seconds per run, so the shape is made once per kind (clumps also cached) and
+mapped to each item by ``dem.clumping.deform_clump`` (centres scaled with the mesh, radii by the
+smallest factor: the spheres stay inscribed) or ``dem.polyhedra.deform_polyhedron`` (cores
+mapped, still convex); mass, centre of mass and inertia are those of the item's own mesh and
+mass. Draw the item set from a fixed generator if the same 30 "physical" items should be fed in
+every run, as in the experiment.
 
 User meshes (``items_from_folder``): STL/OBJ/PLY files in a folder with counts and masses (from
 the caller, or a ``items.toml`` / ``items.json`` manifest in the folder), validated, decimated when
-heavy (scans), then clumped. This module must not run simulations.
+heavy (scans), then decomposed into convex pieces (CoACD) or clumped. This module must not run
+simulations.
 """
 
 from __future__ import annotations
@@ -48,6 +54,7 @@ import trimesh
 from dem.clump import Clump
 from dem.clumping import DEFAULT_N_SPHERES, deform_clump, make_clump
 from dem.mesh import ALLOWED_FILE_TYPES, MeshError, decimate, load_mesh_file
+from dem.polyhedra import Polyhedron, deform_polyhedron, make_polyhedron
 
 logger = logging.getLogger(__name__)
 
@@ -56,6 +63,8 @@ DEFAULT_COUNTS = {"smartphone": 10, "feature_phone": 10, "camera": 10}
 # Scanned meshes are decimated to this many faces before use (the paper: scans reduced to 1/1000).
 FOLDER_MESH_FACES = 5000
 MANIFEST_NAMES = ("items.toml", "items.json")
+REPRESENTATIONS = ("polyhedron", "clump")
+DEFAULT_REPRESENTATION = "clump"
 _CORNER_SECTIONS = 12
 
 
@@ -80,10 +89,17 @@ class ItemSpec:
 
     def mesh(self) -> trimesh.Trimesh:
         """The item as one closed mesh: length along x, width along y, depth along z."""
+        parts = self.pieces()
+        if len(parts) == 1:
+            return parts[0]
+        return trimesh.boolean.union(parts, engine="manifold")
+
+    def pieces(self) -> list[trimesh.Trimesh]:
+        """The item's convex parts (their union is ``mesh()``): the slab, and the lens barrel,
+        which starts inside the body so that the union is one solid, not two touching ones."""
         body = _rounded_slab(self.length, self.width, self.thickness, self.corner_radius)
         if self.lens_diameter <= 0 or self.lens_protrusion <= 0:
-            return body
-        # The barrel starts inside the body so that the union is one solid, not two touching ones.
+            return [body]
         sink = 0.25 * self.thickness
         barrel = trimesh.creation.cylinder(
             radius=0.5 * self.lens_diameter, height=self.lens_protrusion + sink, sections=32
@@ -91,7 +107,7 @@ class ItemSpec:
         barrel.apply_translation(
             [self.lens_offset, 0.0, 0.5 * self.thickness + 0.5 * (self.lens_protrusion - sink)]
         )
-        return trimesh.boolean.union([body, barrel], engine="manifold")
+        return [body, barrel]
 
     def scaled(self, length: float, width: float, thickness: float, mass: float) -> ItemSpec:
         """This spec with dimensions and mass multiplied by the given factors; the lens barrel
@@ -112,13 +128,14 @@ class ItemSpec:
 
 @dataclass(frozen=True)
 class Item:
-    """One body to feed: its mesh (m, mesh coordinates), mass (kg) and clump."""
+    """One body to feed: its mesh (m, mesh coordinates), mass (kg) and the shape the engine
+    simulates (a rounded polyhedron or a clump)."""
 
     name: str
     kind: str
     mesh: trimesh.Trimesh
     mass: float
-    clump: Clump
+    shape: Polyhedron | Clump
     spec: ItemSpec | None = None
 
 
@@ -137,29 +154,6 @@ CATALOGUE: dict[str, ItemSpec] = {
         lens_offset=0.021,
     ),
 }
-
-# (min, max) over the products cited above: length, width, depth (m), mass (kg).
-CITED_RANGES: dict[str, dict[str, tuple[float, float]]] = {
-    "smartphone": {
-        "length": (0.1381, 0.1489),
-        "width": (0.0670, 0.0714),
-        "thickness": (0.0069, 0.0081),
-        "mass": (0.129, 0.188),
-    },
-    "feature_phone": {
-        "length": (0.098, 0.113),
-        "width": (0.048, 0.053),
-        "thickness": (0.0139, 0.022),
-        "mass": (0.073, 0.133),
-    },
-    "camera": {
-        "length": (0.0952, 0.0996),
-        "width": (0.0543, 0.0580),
-        "thickness": (0.0208, 0.0228),
-        "mass": (0.125, 0.147),
-    },
-}
-
 
 def _rounded_slab(length: float, width: float, thickness: float, corner_radius: float) -> trimesh.Trimesh:
     if corner_radius <= 0:
@@ -199,21 +193,44 @@ def _factors(rng: np.random.Generator, spread: float, count: int) -> np.ndarray:
 
 
 def _variant(
-    name: str, kind: str, mesh: trimesh.Trimesh, clump: Clump, factors: np.ndarray, mass: float,
+    name: str,
+    kind: str,
+    mesh: trimesh.Trimesh,
+    shape: Polyhedron | Clump,
+    factors: np.ndarray,
+    mass: float,
     spec: ItemSpec | None,
 ) -> Item:
-    """The item of ``mesh`` scaled by factors (x, y, z) with the given mass, clump mapped along."""
+    """The item of ``mesh`` scaled by factors (x, y, z) with the given mass, shape mapped along."""
     matrix = np.diag(factors[:3])
     scaled = mesh.copy()
     scaled.apply_transform(np.block([[matrix, np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    deform = deform_polyhedron if isinstance(shape, Polyhedron) else deform_clump
     return Item(
         name=name,
         kind=kind,
         mesh=scaled,
         mass=mass,
-        clump=deform_clump(clump, matrix, scaled, mass=mass, name=name),
+        shape=deform(shape, matrix, scaled, mass=mass, name=name),
         spec=spec,
     )
+
+
+def _shape(
+    representation: str,
+    mesh: trimesh.Trimesh,
+    mass: float,
+    resolution: int,
+    name: str,
+    cache_dir,
+    pieces: list[trimesh.Trimesh] | None = None,
+) -> Polyhedron | Clump:
+    """The nominal shape of one kind in the chosen representation."""
+    if representation == "polyhedron":
+        return make_polyhedron(mesh, mass=mass, pieces=pieces, name=name)
+    if representation == "clump":
+        return make_clump(mesh, mass=mass, n_spheres=resolution, name=name, cache_dir=cache_dir)
+    raise ItemsError(f"representation {representation!r}; choose one of {', '.join(REPRESENTATIONS)}")
 
 
 def default_items(
@@ -222,11 +239,13 @@ def default_items(
     spread: float = 0.03,
     resolution: int = DEFAULT_N_SPHERES,
     *,
+    representation: str = DEFAULT_REPRESENTATION,
     cache_dir: str | Path | None | bool = None,
 ) -> list[Item]:
     """The paper's WEEE set (by default 10 + 10 + 10), kind by kind, each item perturbed.
 
-    ``resolution`` is the clump's sphere count (``make_clump(n_spheres=...)``).
+    ``representation``: one of ``REPRESENTATIONS``; ``resolution`` is the clump's sphere count
+    (``make_clump(n_spheres=...)``).
     """
     counts = DEFAULT_COUNTS if counts is None else counts
     items: list[Item] = []
@@ -237,12 +256,10 @@ def default_items(
             continue
         nominal = _spec(kind)
         mesh = _nominal_mesh(kind)
-        clump = make_clump(mesh, mass=nominal.mass, n_spheres=resolution, name=kind, cache_dir=cache_dir)
+        shape = _shape(representation, mesh, nominal.mass, resolution, kind, cache_dir, nominal.pieces())
         for index, factors in enumerate(_factors(rng, spread, count)):
             spec = nominal.scaled(*factors)
-            items.append(
-                _variant(f"{kind}-{index + 1:02d}", kind, mesh, clump, factors, spec.mass, spec)
-            )
+            items.append(_variant(f"{kind}-{index + 1:02d}", kind, mesh, shape, factors, spec.mass, spec))
     return items
 
 
@@ -277,6 +294,7 @@ def items_from_folder(
     resolution: int = DEFAULT_N_SPHERES,
     *,
     scale: float | None = None,
+    representation: str = DEFAULT_REPRESENTATION,
     cache_dir: str | Path | None | bool = None,
 ) -> list[Item]:
     """Items from a folder of STL/OBJ/PLY meshes; kinds are file stems.
@@ -284,7 +302,8 @@ def items_from_folder(
     ``counts`` and ``masses`` (kg) per stem; missing ones come from a manifest in the folder,
     ``items.toml`` (``scale = 0.001`` and ``[items.<stem>]`` tables with ``count`` and ``mass``)
     or the same as ``items.json``. ``scale`` converts the files to metres (manifest, else 1).
-    Meshes over ``FOLDER_MESH_FACES`` faces are decimated first.
+    Meshes over ``FOLDER_MESH_FACES`` faces are decimated first; a non-convex mesh becomes
+    convex pieces by ``dem.polyhedra.convex_pieces`` (CoACD) in the polyhedron representation.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -321,8 +340,11 @@ def items_from_folder(
         for warning in report.warnings:
             logger.warning("%s: %s", files[stem].name, warning)
         mass = float(masses[stem])
-        clump = make_clump(mesh, mass=mass, n_spheres=resolution, name=stem, cache_dir=cache_dir)
+        try:
+            shape = _shape(representation, mesh, mass, resolution, stem, cache_dir)
+        except MeshError as exc:
+            raise ItemsError(f"{files[stem].name}: {exc}") from exc
         for index, factors in enumerate(_factors(rng, spread, count)):
             name = f"{stem}-{index + 1:02d}"
-            items.append(_variant(name, stem, mesh, clump, factors, mass * factors[3], None))
+            items.append(_variant(name, stem, mesh, shape, factors, mass * factors[3], None))
     return items

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dem import quaternion
+
 logger = logging.getLogger(__name__)
 
 NOT_CREATED, IN_TRAY, GONE = 0, 1, 2
@@ -34,21 +36,6 @@ RETAINED_COLOUR = "#d62728"
 
 class SnapshotError(ValueError):
     """A snapshot directory is missing or incomplete; the message says which file."""
-
-
-def quaternion_matrix(quat: np.ndarray) -> np.ndarray:
-    """Rotation matrices (n, 3, 3) from unit quaternions (n, 4), scalar first."""
-    q = np.asarray(quat, dtype=float)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
-        ],
-        axis=1,
-    )
 
 
 class SnapshotWriter:
@@ -168,7 +155,7 @@ def draw_frame(run: Run, frame: Frame, axes_top, axes_side) -> None:
     for ax, (i, j) in ((axes_top, (0, 1)), (axes_side, (0, 2))):
         for face in tri:
             ax.add_patch(Polygon(face[:, [i, j]], closed=True, fc="#dddddd", ec="none", zorder=0))
-    rotations = quaternion_matrix(frame.quat)
+    rotations = quaternion.matrices(frame.quat)
     # Draw from the bottom up so that the top view shows what a camera above would see.
     order = np.argsort(frame.pos[:, 2])
     for k in order:

@@ -29,7 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 class TrayConfig(BaseModel):
     """Tray geometry in metres and degrees; see the module docstring for the frame."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     inlet_width: float = Field(0.260, gt=0, description="Width of the rectangular inlet section, m.")
     outlet_width: float = Field(0.100, gt=0, description="Width of the outlet channel, m.")

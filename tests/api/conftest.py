@@ -109,6 +109,7 @@ def study_definition(**overrides) -> dict:
         "scenario": {},
         "experiment": {"measured": MEASURED},
         "ga": {"population": 6, "offspring": 4, "generations": 2},
+        "validation": {"seeds": 0},  # the counts below stay the search's; validation has its tests
     }
     definition.update(overrides)
     return definition

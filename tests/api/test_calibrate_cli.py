@@ -13,9 +13,11 @@ import time
 from pathlib import Path
 
 import pytest
+import sqlalchemy as sa
 from typer.testing import CliRunner
 
 from api.cli import app
+from tests.conftest import DETERMINISTIC_RESULT_FIELDS
 from tests.worker.test_jobs import TINY_SCENARIO
 
 STUDY = """
@@ -40,6 +42,8 @@ measured = [1, 1, 2]
 population = {population}
 offspring = 2
 generations = 1
+[validation]
+seeds = 0
 """
 
 
@@ -88,8 +92,12 @@ def wait_for_a_result(folder: Path, limit_s: float = 240.0) -> None:
         time.sleep(0.5)
         if not (folder / "demcal.db").exists():
             continue
-        store = store_for(folder)
-        for study_id in store.studies_in([StudyStatus.RUNNING]):
+        try:
+            store = store_for(folder)
+            running = store.studies_in([StudyStatus.RUNNING])
+        except sa.exc.OperationalError:
+            continue  # the file exists before the process has migrated it: not ready yet
+        for study_id in running:
             if any(record.result is not None for record in store.trials(study_id)):
                 return
     raise AssertionError(f"no simulation finished within {limit_s:g} s")
@@ -141,25 +149,60 @@ def test_tiny_study_runs_and_writes_its_results(tmp_path):
     assert "Pareto front" in output
 
 
+def by_individual(store, study_id: str) -> dict[tuple[int, int, int], tuple]:
+    """A study's trials keyed by (generation, individual, replicate): spec and result."""
+    fields = DETERMINISTIC_RESULT_FIELDS
+    return {
+        (r.spec.generation, r.spec.individual, r.spec.replicate): (
+            r.spec.params, r.spec.seed, r.result.model_dump(include=fields) if r.result else None,
+        )
+        for r in store.trials(study_id)
+    }
+
+
 @pytest.mark.slow
-def test_ctrl_c_then_resume_runs_exactly_the_planned_simulations(tmp_path):
-    write_study(tmp_path, population=4, vibration_time=1.0)
-    process = demcal(["calibrate", "study.toml", "--workers", "2"], tmp_path)
+def test_ctrl_c_then_resume_gives_the_trials_and_results_of_an_uninterrupted_run(tmp_path):
+    interrupted_dir, clean_dir = tmp_path / "interrupted", tmp_path / "clean"
+    for folder in (interrupted_dir, clean_dir):
+        folder.mkdir()
+        write_study(folder, population=4, vibration_time=1.0)
+    clean = demcal(["calibrate", "study.toml", "--workers", "1"], clean_dir)  # alongside, same seed
+    process = demcal(["calibrate", "study.toml", "--workers", "1"], interrupted_dir)
     try:
-        wait_for_a_result(tmp_path)
+        wait_for_a_result(interrupted_dir)
     finally:
         process.send_signal(signal.SIGINT)
     output = finish(process, 60)
     study_id = next(word for word in output.split() if word.startswith("st-"))
-    store = store_for(tmp_path)
+    store = store_for(interrupted_dir)
     kept = {r.spec.trial_id: r.result for r in store.trials(study_id) if r.result is not None}
-    resumed = demcal(["calibrate", "--resume", study_id, "--workers", "2"], tmp_path)
+    resumed = demcal(["calibrate", "--resume", study_id, "--workers", "2"], interrupted_dir)
     resumed_output = finish(resumed, 300)
+    clean_output = finish(clean, 300)
+    clean_id = next(word for word in clean_output.split() if word.startswith("st-"))
 
     trials = {r.spec.trial_id: r.result for r in store.trials(study_id)}
     assert process.returncode == 130, output
     assert f"demcal calibrate --resume {study_id}" in output
     assert resumed.returncode == 0, resumed_output
+    assert clean.returncode == 0, clean_output
+    assert 0 < len(kept) < 4 + 2
     assert f"{len(kept)} simulations already done are kept" in resumed_output
     assert len(trials) == 4 + 2 and all(result is not None for result in trials.values())
     assert {tid: trials[tid] for tid in kept} == kept
+    # The same trials (generation, individual, parameters, seed) with the same results as the
+    # run nobody interrupted.
+    assert by_individual(store, study_id) == by_individual(store_for(clean_dir), clean_id)
+
+
+
+
+def test_validation_seeds_beyond_the_budget_exit_2_saying_what_fits(embedded, tmp_path):
+    (tmp_path / "study.toml").write_text(
+        "budget = 200\n[scenario]\n[experiment]\nmeasured = [1]\n[validation]\nseeds = 20\n"
+    )
+
+    result = embedded.invoke(app, ["calibrate", "study.toml"])
+
+    assert result.exit_code == 2
+    assert "validation.seeds <= 5" in result.output

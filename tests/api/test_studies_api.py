@@ -126,3 +126,24 @@ def test_body_above_the_limit_is_413(client, keys):
 
     assert response.status_code == 413
     assert "DEMCAL_MAX_REQUEST_BYTES" in response.json()["detail"]
+
+
+def test_replicates_beyond_the_budget_are_a_422_that_says_what_fits(client, keys):
+    definition = study_definition(replicates=3, budget=20)
+
+    response = client.post("/api/v1/studies", json=definition, headers=keys.auth())
+
+    assert response.status_code == 422
+    assert "budget = 20 simulations cannot hold" in response.text
+    assert "replicates <= 1" in response.text
+
+
+def test_bounds_reaching_into_the_invalid_region_are_warned_about(client, keys):
+    soft = study_definition(parameters={"E": {"low": 1e5, "high": 1e7}})
+    stiff = study_definition(parameters={"E": {"low": 1e7, "high": 1e8}})
+
+    warned = client.post("/api/v1/studies", json=soft, headers=keys.auth()).json()
+    quiet = client.post("/api/v1/studies", json=stiff, headers=keys.auth()).json()
+
+    assert len(warned["warnings"]) == 1 and "likely to be invalid" in warned["warnings"][0]
+    assert quiet["warnings"] == []

@@ -112,7 +112,7 @@ def test_exports_hold_every_trial(client, keys, finished):
     rows = list(csv.DictReader(io.StringIO(csv_response.text)))
     assert csv_response.headers["content-type"].startswith("text/csv")
     assert len(rows) == 12
-    assert {"E", "nu", "e", "mu", "n_remaining", "f1", "f2", "pareto"} <= set(rows[0])
+    assert {"E", "nu", "e", "mu", "engine", "n_remaining", "f1", "f2", "pareto"} <= set(rows[0])
     assert len(json_response.json()["trials"]) == 12
     assert json_response.json()["study"]["id"] == finished
 
@@ -136,3 +136,48 @@ def test_metrics_count_studies_trials_and_seconds(client, keys, store, finished)
     assert 'demcal_studies{status="done"} 1' in text
     assert 'demcal_trials{state="done"} 12' in text
     assert "demcal_simulation_seconds_total " in text
+
+
+def test_study_declares_its_responses_with_units_and_trials_carry_them(client, keys, finished):
+    body = client.get(f"/api/v1/studies/{finished}", headers=keys.auth()).json()
+    assert body["responses"] == [
+        {
+            "name": "n_remaining",
+            "unit": "1",
+            "type": "integer",
+            "failed_value": body["responses"][0]["failed_value"],
+            "description": "N_t: items still in the tray at the end of the vibration.",
+        }
+    ]
+    trials = client.get(f"/api/v1/studies/{finished}/trials", headers=keys.auth()).json()["items"]
+    done = [item for item in trials if item["status"] == "ok"]
+    assert done and all(item["responses"] == {"n_remaining": item["n_remaining"]} for item in done)
+    assert all(item["engine"] == "numba" for item in trials)
+    summary = client.get(f"/api/v1/studies/{finished}/generations", headers=keys.auth()).json()
+    assert set(summary[0]["responses"]) == {"n_remaining"}
+
+
+def test_a_heap_study_declares_its_angle_with_its_unit(client, keys):
+    from tests.api.conftest import study_definition
+
+    definition = study_definition(
+        scenario={"kind": "angle_of_repose"}, experiment={"response": "angle_deg", "measured": [30.0, 31.0]}
+    )
+    created = client.post("/api/v1/studies", json=definition, headers=keys.auth())
+    assert created.status_code == 201, created.text
+    body = created.json()
+    assert [(r["name"], r["unit"], r["type"]) for r in body["responses"]] == [
+        ("angle_deg", "deg", "real"),
+        ("height", "m", "real"),
+    ]
+    assert body["definition"]["experiments"][0]["round"] == "none"
+    bad = client.post(
+        "/api/v1/studies",
+        json=study_definition(
+            scenario={"kind": "angle_of_repose"}, experiment={"response": "N_t", "measured": [3]}
+        ),
+        headers=keys.auth(),
+    )
+    assert bad.status_code == 422 and "no response 'N_t'" in bad.text
+    engine = client.post("/api/v1/studies", json=study_definition(engine="liggghts"), headers=keys.auth())
+    assert engine.status_code == 422 and "does not run scenario 'feeder'" in engine.text

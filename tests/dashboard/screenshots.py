@@ -4,10 +4,10 @@
 
 RUN_DIR is a snapshot directory of a real feeder run (``demcal simulate CONFIG --snapshots
 RUN_DIR``; its ``summary.json`` holds the result); without it only the study picture is made.
-The script seeds a paper-sized synthetic
-study (50 + 9 x 15 trials, see ``seed.py``) through the real store, makes that real run one of
-its trials (parameters, result and snapshots), serves the real app and photographs the study page
-and that trial's page in headless Debian Chromium at laptop size. Not part of the test suite.
+The script seeds a paper-sized synthetic study (50 + 9 x 15 trials, some of them failed, see
+``seed.py``) through the real store, makes that real run one of its trials (parameters, result
+and snapshots), serves the real app and photographs the study page and that trial's page in
+headless Debian Chromium at laptop size. Not part of the test suite.
 """
 
 from __future__ import annotations
@@ -49,7 +49,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         url = f"sqlite:///{Path(tmp) / 'demcal.db'}"
         store = migrated_store(url)
-        study = seed_study(store, population=50, offspring=15, generations=9, real_results=real)
+        # With failures, as real studies have them: soft sets blow up, a few time out.
+        study = seed_study(
+            store, population=50, offspring=15, generations=9, real_results=real, failing=True
+        )
         trial = study.trial_ids[REPLAY_INDIVIDUAL]
         if args.snapshots:
             shutil.copytree(args.snapshots, Path(tmp) / "data" / "snapshots" / trial)

@@ -46,6 +46,7 @@ class SeededStudy:
     target: float = 4.0
     f1: dict[str, float] = field(default_factory=dict)
     n_remaining: dict[str, int] = field(default_factory=dict)
+    failed: dict[str, str] = field(default_factory=dict)
 
 
 def migrated_store(database_url: str) -> SqlStore:
@@ -91,11 +92,15 @@ def seed_study(
     owner: str = "alice",
     name: str = "feeder-calibration",
     real_results: dict[int, SimulationResult] | None = None,
+    failing: bool = False,
 ) -> SeededStudy:
     """A finished study with every trial done, objectives and the final Pareto flags stored.
 
     ``real_results`` replaces the made-up result of these individuals (e.g. with a real feeder
-    run whose snapshots the replay shows); their parameters become the run's.
+    run whose snapshots the replay shows); their parameters become the run's. With ``failing``,
+    soft sets (E below 10^5.4 Pa) blow up and every eleventh individual times out, each with the
+    count where it stopped, which the pages must not show as N_t; ``failed`` maps their trial ids
+    to the status.
     """
     real_results = real_results or {}
     rng = np.random.default_rng(seed)
@@ -106,6 +111,7 @@ def seed_study(
             "scenario": {},
             "experiment": {"measured": MEASURED},
             "ga": {"population": population, "offspring": offspring, "generations": generations},
+            "validation": {"seeds": 0},  # the seeded trials are the search's only
             "objective_time": "wall",
         }
     ).model_dump(mode="json")
@@ -154,13 +160,21 @@ def seed_study(
             if spec.individual in real_results:
                 result = real_results[spec.individual]
                 n_remaining, wall = result.n_remaining, result.wall_time_s
+            failure = _failure(spec) if failing else None
+            if failure is not None:
+                result = result.model_copy(update=failure)
+                seeded.failed[spec.trial_id] = failure["status"].value
             store.record_result(TrialOutcome(spec.trial_id, result, worker="seed"))
+            seeded.trial_ids.append(spec.trial_id)
+            if failure is not None:
+                objectives[spec.trial_id] = (None, None)  # not a measurement: views show none
+                continue
             f1 = abs(n_remaining - target)
             objectives[spec.trial_id] = (f1, wall)
             seeded.f1[spec.trial_id] = f1
             seeded.n_remaining[spec.trial_id] = n_remaining
-            seeded.trial_ids.append(spec.trial_id)
-        front = non_dominated(objectives)
+        measured = {tid: values for tid, values in objectives.items() if values[0] is not None}
+        front = non_dominated(measured)
         # The paper's rule: the fastest Pareto member that matches the experiment within tolerance.
         matching = [tid for tid in front if objectives[tid][0] <= TOLERANCE]
         recommendation = None
@@ -179,6 +193,17 @@ def seed_study(
         seeded.pareto_ids = front
     store.set_status(study_id, StudyStatus.DONE)
     return seeded
+
+
+def _failure(spec: TrialSpec) -> dict | None:
+    """How a seeded run fails, if it does: the result fields to replace."""
+    if spec.params["E"] < 10**5.4:
+        return {"status": SimulationStatus.UNSTABLE, "n_remaining": N_ITEMS,
+                "message": "unstable at t=0.21 s: body 3 overlaps beyond overlap_limit of a sphere radius"}
+    if spec.individual % 11 == 5:
+        return {"status": SimulationStatus.TIMEOUT, "n_remaining": N_ITEMS // 2,
+                "message": "timeout after 600 s of wall time"}
+    return None
 
 
 def snapshot_run(directory: Path, n_items: int, retained: list[bool], frames: int = 60) -> None:

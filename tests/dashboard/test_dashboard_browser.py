@@ -1,10 +1,12 @@
 """The dashboard in headless Chromium against the real app and store: the studies table, the
-study page's plots (read back from plotly's own data on the graph divs), clicking a point, the
-trial page's discharge curve and replay, and creating a study from the form."""
+study page's plots (read back from plotly's own data on the graph divs), failed runs drawn apart
+and counted, clicking a point, the trial page's discharge curve and replay, and creating a study
+from the form."""
 
 from __future__ import annotations
 
 import re
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -12,11 +14,19 @@ import pytest
 from optimizer.protocols import StudyStatus
 from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
-from tests.dashboard.seed import add_finished_trials
+from tests.dashboard.seed import add_finished_trials, seed_study
 
 pytestmark = pytest.mark.browser
 
 PLOTTED = "(id) => document.getElementById(id)?.data?.[0]?.x?.length > 0"
+
+
+def js_fmt(value: float) -> str:
+    """The dashboard's ``fmt`` (api.js): three significant digits, exponent form outside 1e-3..1e5."""
+    if value != 0 and not 1e-3 <= abs(value) < 1e5:
+        mantissa, exponent = f"{value:.2e}".split("e")
+        return f"{mantissa}e{int(exponent):+d}"
+    return format(float(f"{value:.3g}"), "g")
 
 
 def open_study(page, dashboard):
@@ -36,7 +46,9 @@ def test_studies_page_lists_the_study_with_progress_and_status(page, dashboard):
     assert "feeder-calibration" in cells[0]
     assert cells[1] == "done"
     assert cells[2].startswith(f"{n} / {n}")
-    assert "E = " in cells[4] or "best f1 so far" in cells[4]
+    recommended = dashboard.store.get_study(dashboard.study.study_id).recommendation["params"]
+    labels = {"E": "E", "nu": "ν", "e": "e", "mu": "μ"}
+    assert cells[4] == ", ".join(f"{labels[key]} = {js_fmt(recommended[key])}" for key in labels)
     started, finished = cells[6], cells[7]
     assert started != "–" and finished != "–"
     assert page.errors == []
@@ -68,6 +80,47 @@ def running_study(dashboard, name: str, trials: int = 6) -> str:
     dashboard.store.set_status(study_id, StudyStatus.RUNNING)
     add_finished_trials(dashboard.store, study_id, generation=0, first_individual=0, count=trials)
     return study_id
+
+
+# The README: "Above 1,500 points the plots switch to WebGL (scattergl) and the parameter panels
+# to a box per generation".
+WEBGL_ABOVE = 1500
+
+
+def trace_types(page) -> dict[str, dict[str, str]]:
+    """Per plot, the type of each trace by name (plotly's default type is scatter)."""
+    return page.evaluate(
+        """() => Object.fromEntries(['pareto-plot', 'generation-plot', 'parameter-plot'].map((id) => [
+             id,
+             Object.fromEntries(document.getElementById(id).data.map((t) => [t.name, t.type || 'scatter'])),
+           ]))"""
+    )
+
+
+def test_plots_switch_to_webgl_and_boxes_above_1500_points(page, dashboard):
+    definition = parse_study({"name": "large", "scenario": {}, "experiment": {"measured": [4]}})
+    study_id = dashboard.store.create_study(definition.model_dump(mode="json"), owner="alice")
+    trials = WEBGL_ABOVE + 1
+    add_finished_trials(dashboard.store, study_id, generation=0, first_individual=0, count=trials // 2)
+    add_finished_trials(dashboard.store, study_id, generation=1, first_individual=trials // 2,
+                        count=trials - trials // 2)
+    dashboard.store.set_status(study_id, StudyStatus.DONE)
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function(PLOTTED, arg="pareto-plot")
+    page.wait_for_function("(id) => document.getElementById(id)?.data?.length > 0", arg="parameter-plot")
+    large = trace_types(page)
+    points = page.evaluate("() => document.getElementById('pareto-plot').data[0].x.length")
+    open_study(page, dashboard)  # the seeded study: 185 trials, below the switch
+    page.wait_for_function("(id) => document.getElementById(id)?.data?.length > 0", arg="parameter-plot")
+    small = trace_types(page)
+
+    assert points == trials
+    assert large["pareto-plot"]["trials"] == large["generation-plot"]["trials"] == "scattergl"
+    assert "box" in set(large["parameter-plot"].values())
+    assert len(dashboard.study.trial_ids) <= WEBGL_ABOVE
+    assert small["pareto-plot"]["trials"] == small["generation-plot"]["trials"] == "scatter"
+    assert "box" not in set(small["parameter-plot"].values())
+    assert page.errors == []
 
 
 def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
@@ -173,23 +226,57 @@ def test_trial_page_shows_the_discharge_curve_and_replays_the_snapshots(page, da
     save_screenshot(page, "dashboard-replay")
 
 
-def test_replay_marks_the_retained_items_in_their_colour(page, dashboard):
+# Pixels of the replay canvas below its legend, classified as the retained colour (Okabe-Ito
+# orange #e69f00) or the discharged one (sky blue #56b4e9), both drawn at 90 % opacity over the
+# tray or the background, so matched by hue range rather than exactly.
+COUNT_COLOURS = """() => {
+  const c = document.getElementById('replay');
+  const d = c.getContext('2d').getImageData(0, 60, c.width, c.height - 60).data;
+  let orange = 0, blue = 0;
+  for (let i = 0; i < d.length; i += 4) {
+    const [r, g, b] = [d[i], d[i + 1], d[i + 2]];
+    if (r > 200 && g > 140 && g < 190 && b < 70) orange++;
+    else if (r < 140 && g > 160 && g < 205 && b > 200) blue++;
+  }
+  return {orange, blue};
+}"""
+
+
+def replay_colours(page, dashboard, frame: str, retained=None) -> dict[str, int]:
+    """Orange and blue pixels of the replay at ``frame`` ("first" or "last"), optionally with the
+    API's retained flags replaced (every item retained, or none)."""
+    page.unroute("**/replay*")
+    if retained is not None:
+        def rewrite(route):
+            response = route.fetch()
+            doc = response.json()
+            doc["retained"] = [retained] * len(doc["retained"])
+            route.fulfill(response=response, json=doc)
+
+        page.route("**/replay*", rewrite)
     page.goto(dashboard.url(f"/trials/{dashboard.study.replay_trial_id}"))
     page.wait_for_selector("#trial[data-loaded='1']")
+    if frame == "first":
+        page.evaluate(
+            "() => { const s = document.getElementById('replay-frame'); s.value = '0';"
+            " s.dispatchEvent(new Event('input')); }"
+        )
+    return page.evaluate(COUNT_COLOURS)
 
-    # Count distinct retained-orange blobs is fragile; count orange pixels against an empty tray.
-    orange = page.evaluate(
-        """() => {
-             const c = document.getElementById('replay');
-             const d = c.getContext('2d').getImageData(0, 60, c.width, c.height - 60).data;
-             let n = 0;
-             for (let i = 0; i < d.length; i += 4) if (d[i] === 230 && d[i+1] === 159 && d[i+2] === 0) n++;
-             return n;
-           }"""
-    )
 
-    assert sum(RETAINED_IN_REPLAY) > 0
-    assert orange > 500
+def test_replay_marks_the_retained_items_in_their_colour(page, dashboard):
+    first = replay_colours(page, dashboard, "first")
+    last = replay_colours(page, dashboard, "last")
+    all_retained = replay_colours(page, dashboard, "first", retained=True)
+    none_retained = replay_colours(page, dashboard, "first", retained=False)
+
+    # At the start every item is in the tray: some retained (orange), most not (blue).
+    assert 0 < sum(RETAINED_IN_REPLAY) < len(RETAINED_IN_REPLAY)
+    assert first["orange"] > 0 and first["blue"] > 0
+    assert 0 < first["orange"] < all_retained["orange"]
+    assert none_retained["orange"] == 0 and all_retained["blue"] == 0
+    # At the end only the retained items are left in the tray, all of them orange.
+    assert last["orange"] > 0 and last["blue"] == 0
 
 
 def test_trial_without_snapshots_says_there_is_nothing_to_replay(page, dashboard):
@@ -233,3 +320,78 @@ def test_new_study_form_shows_the_api_message_for_an_invalid_definition(page, da
     message = page.locator("#new-result pre.errors")
     message.wait_for()
     assert "parameters.nu.high" in message.inner_text()
+
+
+def test_failed_runs_are_drawn_apart_and_counted_by_status(page, dashboard):
+    seeded = seed_study(dashboard.store, name="with-failures", failing=True, seed=3)
+    validated = with_validation(dashboard.store, seeded)
+    failed = seeded.failed
+    counts = Counter(failed.values())
+    page.goto(dashboard.url(f"/studies/{seeded.study_id}"))
+    page.wait_for_function(PLOTTED, arg="pareto-plot")
+    page.wait_for_function(PLOTTED, arg="progress-plot")
+    page.wait_for_selector("#identifiability tbody tr[data-parameter]")
+
+    pareto = page.evaluate(
+        """() => document.getElementById('pareto-plot').data.map((t) => ({
+             name: t.name, ids: t.customdata.map((c) => c[0]), y: t.y, yaxis: t.yaxis || 'y'}))"""
+    )
+    fig5 = page.evaluate(
+        """() => document.getElementById('generation-plot').data.map((t) => ({
+             name: t.name, type: t.type, y: t.y, ids: (t.customdata || []).map((c) => c[0])}))"""
+    )
+    crosses = page.evaluate(
+        """() => document.getElementById('parameter-plot').data
+             .filter((t) => t.name.startsWith('failed')).map((t) => t.customdata.map((c) => c[0]))"""
+    )
+    facts = page.locator("#study-facts").inner_text()
+    verdicts = page.locator("#identifiability tbody tr").count()
+    page.wait_for_selector("#validation-table tbody tr")
+    validation_rows = page.locator("#validation-table tbody tr").all_inner_texts()
+    verdict = page.locator("#validation-status").inner_text()
+
+    assert set(counts) == {"unstable", "timeout"}  # the seeded study has both kinds
+    measured, front, *strips = pareto
+    assert not set(measured["ids"]) & set(failed) and not set(front["ids"]) & set(failed)
+    assert sorted(measured["ids"]) == sorted(tid for tid in seeded.trial_ids if tid not in failed)
+    by_status = {strip["name"].split()[0]: strip for strip in strips}
+    for status in counts:
+        assert sorted(by_status[status]["ids"]) == sorted(t for t, s in failed.items() if s == status)
+        assert set(by_status[status]["y"]) == {status} and by_status[status]["yaxis"] == "y2"
+    n_t_points = next(trace for trace in fig5 if trace["name"] == "trials")
+    assert not set(n_t_points["ids"]) & set(failed)
+    assert all(sorted(ids) == sorted(failed) for ids in crosses) and crosses  # one per parameter panel
+    bars = {trace["name"].split()[0]: sum(trace["y"]) for trace in fig5 if trace["type"] == "bar"}
+    assert bars == dict(counts)
+    text = ", ".join(f"{status} {counts[status]}" for status in ("unstable", "timeout"))
+    assert f"{sum(counts.values())} ({text})" in facts
+    assert verdicts == 4
+    assert verdict == "Validation: validated"
+    assert [row.split("\t")[-1] for row in validation_rows] == [row["verdict"] for row in validated]
+    assert "1 failed" in validation_rows[1]
+    assert page.errors == []
+    save_screenshot(page, "dashboard-failures")
+
+
+def with_validation(store, seeded) -> list[dict]:
+    """Give the seeded study's recommendation a validation table in the shape the driver stores
+    (``optimizer/validation.py``): the recommended set validated, a second one not reproduced."""
+    study = store.get_study(seeded.study_id)
+    recommendation = dict(study.recommendation)
+    rows = [
+        {"individual": 41, "params": recommendation["params"], "search_f1": 0.0, "search_replicates": 1,
+         "f2": 12.1, "seeds": [11, 12, 13, 14], "n_remaining": [3, 4, 4, 6], "failures": [], "w1": 1.2,
+         "median": 4.0, "median_interval": [3.0, 6.0], "f1": 0.0, "f1_interval": [0.0, 2.0],
+         "verdict": "validated"},
+        {"individual": 34, "params": recommendation["params"], "search_f1": 0.0, "search_replicates": 1,
+         "f2": 12.2, "seeds": [11, 12, 13, 14], "n_remaining": [9, 11, 12],
+         "failures": ["unstable: overlap"], "w1": 6.1, "median": 11.0, "median_interval": [9.0, 12.0],
+         "f1": 7.0, "f1_interval": [5.0, 8.0], "verdict": "not reproduced"},
+    ]
+    recommendation.update(
+        validation_status="validated", validation=rows, f1_interval=[0.0, 1.0], replicates=1
+    )
+    store.save_generation(
+        seeded.study_id, study.generation, b"synthetic", seeded.pareto_ids, recommendation, objectives={}
+    )
+    return rows

@@ -82,10 +82,36 @@ def test_one_sphere_in_a_cube_has_the_analytic_corner_gap():
     assert clump.max_error == pytest.approx(corner_gap, rel=0.02)
 
 
+PHONE = (0.146, 0.071, 0.008)
+
+
+def face_gap_lower_bound(n_spheres: int, length: float, width: float, thickness: float) -> float:
+    """The smallest largest gap any n inscribed spheres can leave on a slab's face.
+
+    A sphere of radius r_j <= t/2 whose centre lies h >= r_j below the face brings a face point
+    at horizontal distance d within g of its surface only if sqrt(d^2 + h^2) <= r_j + g, i.e.
+    d^2 <= g^2 + 2 g r_j <= g^2 + g t: a disc of area pi (g^2 + g t). n such discs must cover
+    the face (area L W), so g >= sqrt(t^2/4 + L W / (n pi)) - t/2.
+    """
+    half = thickness / 2
+    return float(np.sqrt(half**2 + length * width / (n_spheres * np.pi)) - half)
+
+
+def measured_gap(mesh, clump, samples: int = 100_000) -> float:
+    """The largest distance from the mesh surface to the spheres' envelope, on our own sample."""
+    points = np.vstack([trimesh.sample.sample_surface(mesh, samples, seed=11)[0], mesh.vertices])
+    centres = _centres_in_mesh_frame(clump)
+    gaps = np.full(len(points), np.inf)
+    for centre, radius in zip(centres, clump.radius, strict=True):
+        gaps = np.minimum(gaps, np.linalg.norm(points - centre, axis=1) - radius)
+    return float(gaps.max())
+
+
 def test_phone_at_default_resolution_is_a_modest_clump_with_its_thickness_and_outline(phone):
     clump = make_clump(phone, mass=0.17, cache_dir=False)
 
-    assert 15 <= clump.n_spheres <= 40
+    # A gap this far from zero never stops the cover early: every allowed sphere is used.
+    assert clump.n_spheres == clumping.DEFAULT_N_SPHERES
     assert clump.radius.max() == pytest.approx(0.004, rel=2e-3)
     low = (clump.offset - clump.radius[:, None]).min(axis=0)
     high = (clump.offset + clump.radius[:, None]).max(axis=0)
@@ -93,24 +119,55 @@ def test_phone_at_default_resolution_is_a_modest_clump_with_its_thickness_and_ou
     # Thickness is exact; the outline's extremes come within a few mm of the 146 x 71 mm edges.
     assert envelope[0] == pytest.approx(0.008, rel=2e-3)
     np.testing.assert_allclose(envelope[1:], [0.071, 0.146], atol=0.004)
-    # The gap in the middle of the faces between spheres of radius 4 mm is what remains.
-    assert 0.0 < clump.max_error < 0.071 / 2
+    # The gap in the middle of the faces between spheres of radius 4 mm is what remains: no less
+    # than geometry allows, and what an independent sample of the surface finds.
+    assert clump.max_error >= face_gap_lower_bound(clump.n_spheres, *PHONE)
+    assert clump.max_error == pytest.approx(measured_gap(phone, clump), abs=SAMPLE_SPACING)
+
+
+# Our 100,000 surface samples of the phone (area 0.0242 m^2) lie about 0.5 mm apart; two
+# independent samplings of the same largest gap agree to about twice that.
+SAMPLE_SPACING = 1e-3
+
+
+# The README: "a 146 x 71 x 8 mm phone has a largest gap of about 25 / 15 / 11 / 6 mm at
+# 12 / 24 / 40 / 100 spheres" (quoted to the millimetre).
+@pytest.mark.slow
+@pytest.mark.parametrize(("n_spheres", "readme_gap_mm"), [(12, 25), (24, 15), (40, 11), (100, 6)])
+def test_phone_gaps_are_those_the_readme_quotes(phone, n_spheres, readme_gap_mm):
+    clump = make_clump(phone, mass=0.17, n_spheres=n_spheres, cache_dir=False)
+
+    gap = measured_gap(phone, clump)
+
+    assert gap * 1e3 == pytest.approx(readme_gap_mm, abs=0.5 + SAMPLE_SPACING * 1e3)
+    assert clump.max_error == pytest.approx(gap, abs=SAMPLE_SPACING)
+    assert gap >= face_gap_lower_bound(n_spheres, *PHONE)
 
 
 def test_more_spheres_give_a_smaller_error(phone):
-    coarse = make_clump(phone, mass=0.17, n_spheres=8, cache_dir=False)
-    fine = make_clump(phone, mass=0.17, n_spheres=60, cache_dir=False)
+    errors = [make_clump(phone, mass=0.17, n_spheres=n, cache_dir=False).max_error for n in (8, 24, 60)]
 
-    assert fine.max_error < 0.7 * coarse.max_error
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[2] >= face_gap_lower_bound(60, *PHONE)
 
 
-def test_tolerance_mode_meets_the_tolerance_on_a_capsule():
-    capsule = trimesh.creation.capsule(height=0.06, radius=0.01, count=[24, 24])
+def test_tolerance_mode_meets_the_tolerance_on_a_capsule_with_no_sphere_to_spare():
+    radius, length, sections = 0.01, 0.06, 24
+    capsule = trimesh.creation.capsule(height=length, radius=radius, count=[sections, sections])
     tolerance = 0.0005
 
     clump = make_clump(capsule, density=1000.0, tolerance=tolerance, cache_dir=False)
+    one_fewer = make_clump(capsule, density=1000.0, n_spheres=clump.n_spheres - 1, cache_dir=False)
 
-    assert clump.n_spheres < 40
+    # The cylinder is a 24-gon prism: corner lines at `radius`, faces at radius cos(pi/24), which
+    # bounds every inscribed sphere. A sphere then brings a corner line within the tolerance over
+    # an axial length of at most 2 sqrt((r_in + tol)^2 - radius^2) (5.8 mm): covering the 60 mm
+    # of cylinder takes at least ceil(60 / 5.8) = 11 spheres.
+    inscribed = radius * np.cos(np.pi / sections)
+    reach = 2 * np.sqrt((inscribed + tolerance) ** 2 - radius**2)
+    assert clump.n_spheres >= int(np.ceil(length / reach))
+    # The cover stops at the first sphere count that meets the tolerance.
+    assert one_fewer.max_error > tolerance
     # Measured on an independent, denser sample than the fit used: allow a little slack.
     assert clump.max_error <= 1.5 * tolerance
 
@@ -128,6 +185,8 @@ def test_resolution_arguments_are_checked(phone):
 
 
 def test_cache_hit_returns_the_same_clump_without_fitting(phone, tmp_path, monkeypatch):
+    # An empty memory cache first, so that the disk cache is written whatever ran before.
+    monkeypatch.setattr(clumping, "_MEMORY_CACHE", {})
     first = make_clump(phone, mass=0.17, n_spheres=12, cache_dir=tmp_path, name="a")
     monkeypatch.setattr(clumping, "_MEMORY_CACHE", {})
 

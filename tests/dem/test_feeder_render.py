@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from dem import quaternion
 from dem.scenarios.render import (
     GONE,
     IN_TRAY,
@@ -12,7 +13,6 @@ from dem.scenarios.render import (
     SnapshotError,
     SnapshotWriter,
     load_run,
-    quaternion_matrix,
     render_gif,
     render_png,
 )
@@ -42,11 +42,12 @@ def two_item_run(tmp_path):
     return tmp_path
 
 
-def test_quaternion_matrix_rotates_x_to_y_for_a_quarter_turn_about_z():
+def test_quaternion_matrices_turn_x_to_y_for_a_quarter_turn_about_z_as_to_matrix_does():
     half = np.pi / 4
-    rotation = quaternion_matrix(np.array([[np.cos(half), 0.0, 0.0, np.sin(half)]]))[0]
+    rotation = quaternion.matrices(np.array([[np.cos(half), 0.0, 0.0, np.sin(half)]]))[0]
 
     assert rotation @ np.array([1.0, 0.0, 0.0]) == pytest.approx([0.0, 1.0, 0.0])
+    assert rotation == pytest.approx(quaternion.matrix([np.cos(half), 0.0, 0.0, np.sin(half)]))
 
 
 def test_snapshots_read_back_with_retained_items(two_item_run):

@@ -167,3 +167,63 @@ def test_stop_less_than_half_a_step_ahead_is_still_reached():
 
     assert report.steps == 1
     assert sim.t >= stop
+
+
+def _impact(E, e, speed, dt=None, chunk=None):
+    """A sphere thrown at a floor without gravity; returns (simulation, report, deepest overlap)."""
+    from dem.contact import ContactParams
+
+    params = ContactParams(E=E, nu=0.3, e=e, mu=0.0)
+    sim = Simulation(params, gravity=(0, 0, 0), domain_min=(-1, -1, -1), domain_max=(1, 1, 1), dt=dt)
+    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 0.4))
+    body = Clump.solid_sphere(0.01, 2500.0)
+    sim.add_body(body, (0, 0, 0.0100001), velocity=(0, 0, -speed))
+    deepest = 0.0
+
+    def watch(s):
+        nonlocal deepest
+        deepest = max(deepest, s.current_overlap())
+
+    report = sim.run(0.006, chunk_time=chunk or sim.dt, on_chunk=watch)
+    return sim, body, report, deepest
+
+
+@pytest.mark.parametrize("e", [1.0, 0.5, 0.1])
+def test_peak_overlap_of_an_impact_matches_the_damped_oscillator(e):
+    from dem.validity import peak_overlap
+
+    # A step well below the automatic one, so the discrete damping is within 0.1 % of the ODE's.
+    sim, body, report, deepest = _impact(E=1e6, e=e, speed=0.5, dt=2.5e-6)
+
+    expected = peak_overlap(0.5, body.mass, 0.01 * 1e6, e)  # K = E D / 2 = E r
+    assert report.ok, report.message
+    assert deepest * 0.01 == pytest.approx(expected, rel=2e-3)
+    assert sim.max_overlap == pytest.approx(deepest)  # what a run reports: the deepest seen
+
+
+def test_softest_valid_E_separates_valid_and_invalid_impacts():
+    from dem.validity import softest_valid_E
+
+    body = Clump.solid_sphere(0.01, 2500.0)
+    threshold = softest_valid_E(2.0, body.mass, 0.02, 0.01, e=0.5)
+
+    _, _, above, _ = _impact(E=1.3 * threshold, e=0.5, speed=2.0)
+    sim, _, below, _ = _impact(E=0.7 * threshold, e=0.5, speed=2.0)
+
+    assert above.ok, above.message
+    assert below.status == "invalid"
+    assert "too soft for this impact" in below.message and "outside the linear contact model" in below.message
+    # The measured figure: where the impact was heading, beyond the limit; about (1/0.7)^0.5 x it.
+    assert sim.max_overlap == pytest.approx(0.5 / math.sqrt(0.7), rel=0.1)
+
+
+def test_overlap_past_the_limit_with_a_step_too_long_is_unstable_with_step_advice():
+    from dem.validity import softest_valid_E
+
+    body = Clump.solid_sphere(0.01, 2500.0)
+    E = 3 * softest_valid_E(2.0, body.mass, 0.02, 0.01, e=0.5)
+
+    _, _, report, _ = _impact(E=E, e=0.5, speed=2.0, dt=4e-3, chunk=4e-3)
+
+    assert report.status == "unstable"
+    assert "forced dt exceeds the automatic step" in report.message

@@ -60,6 +60,7 @@ def tiny_study(name: str, *, population: int = 4, offspring: int = 2, generation
         "experiment": {"measured": MEASURED},
         "parameters": {"E": {"low": 1e6, "high": 1e7}},
         "ga": {"population": population, "offspring": offspring, "generations": generations},
+        "validation": {"seeds": 0},  # the counts are the search's; the validation has its own tests
         "seed": 7,
         **extra,
     }
@@ -123,39 +124,54 @@ class Cluster:
         }
         self.processes: dict[str, subprocess.Popen] = {}
         self.logs: dict[str, Path] = {}
-        token = self.run("apikey", "create", "--owner", "e2e", "--admin").stdout.strip().splitlines()[-1]
-        self.http = httpx.Client(
-            base_url=f"http://127.0.0.1:{self.port}/api/v1",
-            headers={"Authorization": f"Bearer {token}"},
+        self.token = self.run("apikey", "create", "--owner", "e2e", "--admin").stdout.strip().splitlines()[-1]
+        self.http = self._client(self.port)
+        self._clients: dict[int, httpx.Client] = {self.port: self.http}
+
+    def _client(self, port: int) -> httpx.Client:
+        return httpx.Client(
+            base_url=f"http://127.0.0.1:{port}/api/v1",
+            headers={"Authorization": f"Bearer {self.token}"},
             timeout=30,
         )
+
+    def api(self, port: int | None = None) -> httpx.Client:
+        """The API of the replica listening on ``port`` (the first one by default)."""
+        port = port or self.port
+        if port not in self._clients:
+            self._clients[port] = self._client(port)
+        return self._clients[port]
 
     def run(self, *args: str) -> subprocess.CompletedProcess:
         return subprocess.run(
             [*DEMCAL, *args], cwd=self.workdir, env=self.env, capture_output=True, text=True, check=True
         )
 
-    def start(self, name: str, *args: str, cwd: Path | None = None) -> subprocess.Popen:
+    def start(
+        self, name: str, *args: str, cwd: Path | None = None, env: dict | None = None
+    ) -> subprocess.Popen:
         log = self.workdir / f"{name}.log"
         handle = log.open("a")
         process = subprocess.Popen(
-            [*DEMCAL, *args], cwd=cwd or self.workdir, env=self.env, stdout=handle, stderr=subprocess.STDOUT
+            [*DEMCAL, *args], cwd=cwd or self.workdir, env={**self.env, **(env or {})}, stdout=handle,
+            stderr=subprocess.STDOUT,
         )
         handle.close()
         self.processes[name], self.logs[name] = process, log
         return process
 
-    def start_serve(self, name: str = "serve") -> subprocess.Popen:
-        process = self.start(name, "serve")
-        wait_for(self._healthy, 60, f"{name} to answer /healthz")
+    def start_serve(self, name: str = "serve", port: int | None = None) -> subprocess.Popen:
+        """``demcal serve`` on the cluster's port, or (another replica) on ``port``."""
+        process = self.start(name, "serve", env={"DEMCAL_PORT": str(port)} if port else None)
+        wait_for(lambda: self._healthy(port or self.port), 60, f"{name} to answer /healthz")
         return process
 
     def start_worker(self, name: str, cwd: Path | None = None) -> subprocess.Popen:
         return self.start(name, "worker", "--name", name, "--heartbeat", "1", cwd=cwd)
 
-    def _healthy(self) -> bool:
+    def _healthy(self, port: int) -> bool:
         try:
-            return httpx.get(f"http://127.0.0.1:{self.port}/healthz", timeout=2).status_code == 200
+            return httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=2).status_code == 200
         except httpx.HTTPError:
             return False
 
@@ -182,7 +198,8 @@ class Cluster:
                     self.processes[name].wait(15)
                 except subprocess.TimeoutExpired:
                     self.kill(name)
-        self.http.close()
+        for client in self._clients.values():
+            client.close()
         self.redis.close()
 
     def log_tail(self, lines: int = 40) -> str:
@@ -194,8 +211,8 @@ class Cluster:
 
     # -- the API as a client sees it ----------------------------------------------------------
 
-    def create_study(self, definition: dict) -> str:
-        response = self.http.post("/studies", json=definition)
+    def create_study(self, definition: dict, via: int | None = None) -> str:
+        response = self.api(via).post("/studies", json=definition)
         assert response.status_code == 201, response.text
         return response.json()["id"]
 
@@ -204,12 +221,12 @@ class Cluster:
         response.raise_for_status()
         return response.json()
 
-    def trials(self, study_id: str) -> list[dict]:
-        response = self.http.get(f"/studies/{study_id}/trials", params={"limit": 5000})
+    def trials(self, study_id: str, via: int | None = None) -> list[dict]:
+        response = self.api(via).get(f"/studies/{study_id}/trials", params={"limit": 5000})
         response.raise_for_status()
         return response.json()["items"]
 
-    def wait_until_done(self, study_id: str, timeout: float = 150) -> dict:
+    def wait_until_done(self, study_id: str, timeout: float = 300) -> dict:
         def finished():
             study = self.study(study_id)
             return study if study["status"] in ("done", "failed", "cancelled") else None

@@ -6,14 +6,20 @@ worker, a restarted server, a flushed Redis and a worker that cannot run its sim
 from __future__ import annotations
 
 import signal
+import time
+from dataclasses import asdict
 
 import pytest
 import trimesh
 
 from api.db import create_db_engine
 from api.store import SqlStore
+from dem.result import SimulationResult, SimulationStatus
 from dem.scenarios.tray import TrayConfig, parametric_tray_mesh
-from tests.e2e.conftest import tiny_scenario, tiny_study, wait_for
+from optimizer.protocols import TrialOutcome
+from tests.e2e.conftest import free_port, tiny_scenario, tiny_study, wait_for
+from worker.jobs import run_trial
+from worker.rq_job import results_key
 
 pytestmark = [pytest.mark.postgres, pytest.mark.redis, pytest.mark.slow]
 
@@ -28,12 +34,44 @@ def stored_trials(cluster, study_id: str):
         engine.dispose()
 
 
+# What a result depends on: the parameters and the seed, never the machine or the run's history.
+DETERMINISTIC = {
+    "status", "n_items", "n_remaining", "discharge_times", "emptied_at", "sim_time", "steps", "cost",
+}
+
+
 def assert_every_trial_has_exactly_one_result(cluster, study_id: str) -> list[dict]:
+    """Exactly once: every planned trial has one recorded result, no result is left waiting in
+    Redis to be counted again, and the store refuses a second result for any trial."""
     trials = cluster.trials(study_id)
-    ids = [trial["id"] for trial in trials]
-    assert len(ids) == len(set(ids)) == TRIALS
+    assert len(trials) == TRIALS
     assert all(trial["state"] == "done" and trial["status"] for trial in trials), trials
+    assert cluster.redis.llen(results_key(cluster.queue, study_id)) == 0
+    engine = create_db_engine(cluster.env["DEMCAL_DATABASE_URL"])
+    try:
+        store = SqlStore(engine)
+        records = store.trials(study_id)
+        assert sorted(record.spec.trial_id for record in records) == sorted(trial["id"] for trial in trials)
+        assert all(record.result is not None for record in records)
+        for record in records:
+            intruder = SimulationResult(status=SimulationStatus.OK, n_items=1, n_remaining=99)
+            second = TrialOutcome(record.spec.trial_id, intruder, worker="intruder")
+            assert store.record_result(second) is False
+        assert {r.spec.trial_id: r.result for r in store.trials(study_id)} == {
+            r.spec.trial_id: r.result for r in records
+        }
+    finally:
+        engine.dispose()
     return trials
+
+
+def assert_result_equals_a_clean_run(cluster, study_id: str, trial_id: str) -> None:
+    """The recorded result of a trial that was interrupted and run again is the one an
+    uninterrupted run of the same spec gives (here, in this process)."""
+    [record] = [record for record in stored_trials(cluster, study_id) if record.spec.trial_id == trial_id]
+    clean = SimulationResult.model_validate(run_trial(asdict(record.spec)))
+    assert clean.status is SimulationStatus.OK, clean.message
+    assert record.result.model_dump(include=DETERMINISTIC) == clean.model_dump(include=DETERMINISTIC)
 
 
 def test_serve_and_two_workers_complete_a_study_and_the_api_shows_what_is_stored(cluster):
@@ -96,6 +134,7 @@ def test_a_worker_killed_mid_trial_loses_no_trial_and_counts_none_twice(cluster)
     assert study["status"] == "done", study["message"]
     trials = {trial["id"]: trial for trial in assert_every_trial_has_exactly_one_result(cluster, study_id)}
     assert trials[killed_trial]["worker"] == "w2"
+    assert_result_equals_a_clean_run(cluster, study_id, killed_trial)
 
 
 def test_a_restarted_serve_resumes_the_study_mid_generation(cluster):
@@ -127,6 +166,11 @@ def test_a_flushed_redis_mid_generation_loses_no_trial(cluster):
     assert_every_trial_has_exactly_one_result(cluster, study_id)
 
 
+@pytest.mark.xfail(
+    reason="open: since scenario paths are confined to $DEMCAL_DATA_DIR/meshes (issue 14 item 4) the "
+    "relative tray.stl resolves into the server's data dir, so the per-worker cwd premise is gone",
+    strict=False,
+)
 def test_a_worker_whose_simulation_fails_reports_an_error_trial_and_the_study_goes_on(cluster, tmp_path):
     # The study's tray is a user mesh given by a relative path: present where w-with-mesh runs,
     # missing where w-without-mesh runs (a machine nobody copied the file to).
@@ -164,8 +208,77 @@ def test_a_worker_stopped_with_sigterm_finishes_its_trial_first(cluster):
 
     worker.send_signal(signal.SIGTERM)
     exit_code = worker.wait(120)
+    # The worker has pushed its result; serve records it on its next step (every second).
+    def recorded():
+        trial = {t["id"]: t for t in cluster.trials(study_id)}[running]
+        return trial if trial["state"] == "done" else None
+
+    finished = wait_for(recorded, 30, f"serve to record {running}")
 
     assert exit_code == 0
-    finished = {trial["id"]: trial for trial in cluster.trials(study_id)}
-    assert finished[running]["worker"] == "w1"
-    assert finished[running]["state"] in ("done",)
+    assert finished["worker"] == "w1"
+    assert finished["status"] == "ok"
+    assert cluster.worker_busy("w1") is None
+
+
+@pytest.mark.xfail(
+    reason="open: fails on main since the worker warm-up and the cold-stop grace landed together; "
+    "not yet diagnosed (closing note, issue 17)",
+    strict=False,
+)
+def test_a_second_sigterm_stops_the_worker_at_once_and_the_trial_runs_elsewhere(cluster):
+    # Trials of 10 simulated seconds: longer than the two signals take (about 2 s) even on a
+    # fast machine, so the second one reaches a trial still running.
+    definition = tiny_study("second-sigterm", population=2, offspring=1, generations=1)
+    definition["scenario"]["stages"]["vibration_time"] = 10.0
+    cluster.start_serve()
+    worker = cluster.start_worker("w1")
+    study_id = cluster.create_study(definition)
+    running = wait_for(lambda: cluster.worker_busy("w1"), 60, "w1 to start a trial")
+
+    worker.send_signal(signal.SIGTERM)
+    # The worker notes the first signal in its RQ record; RQ takes a second signal within a
+    # second of the first for a duplicate (a pool and a terminal both signalling), so wait that out.
+    wait_for(lambda: cluster.redis.hget("rq:worker:w1", "shutdown_requested_date"), 30, "the first SIGTERM")
+    time.sleep(1.5)
+    assert worker.poll() is None, "the first SIGTERM must let the trial finish"
+    worker.send_signal(signal.SIGTERM)
+    started = time.monotonic()
+    exit_code = worker.wait(30)
+    stopped_after = time.monotonic() - started
+    unfinished = {t["id"]: t for t in cluster.trials(study_id)}[running]
+    cluster.start_worker("w2")
+    study = cluster.wait_until_done(study_id, timeout=240)
+
+    assert stopped_after < 5.0
+    assert exit_code != 0
+    assert unfinished["state"] != "done"
+    assert study["status"] == "done", study["message"]
+    assert {t["id"]: t for t in cluster.trials(study_id)}[running]["worker"] == "w2"
+
+
+def test_two_serve_replicas_at_once_share_the_studies(cluster):
+    second_port = free_port()
+    first = cluster.start_serve("serve-1")
+    second = cluster.start_serve("serve-2", port=second_port)
+    cluster.start_worker("w1")
+    cluster.start_worker("w2")
+    studies = [cluster.create_study(tiny_study(f"replica-{k}"), via=via) for k, via in
+               enumerate([cluster.port, second_port])]
+
+    done = [cluster.wait_until_done(study_id, timeout=240) for study_id in studies]
+    # A finished study's lease is let go by whichever replica held it (at its next tick).
+    leases = [f"demcal:lease:{study_id}" for study_id in studies]
+    wait_for(lambda: not cluster.redis.exists(*leases), 30, "the leases to be released")
+    logs = {name: cluster.logs[name].read_text(errors="replace") for name in ("serve-1", "serve-2")}
+
+    assert first.poll() is None and second.poll() is None
+    assert [study["status"] for study in done] == ["done"] * 2, [study["message"] for study in done]
+    for study_id in studies:
+        assert_every_trial_has_exactly_one_result(cluster, study_id)
+        # Either replica shows every study, with the same trials.
+        assert cluster.trials(study_id, via=second_port) == cluster.trials(study_id)
+        # One replica drove it, from start to end: no replica took it while another held it.
+        drivers = [name for name, text in logs.items() for line in text.splitlines()
+                   if f"study {study_id}: now driven by" in line]
+        assert len(drivers) == 1, (study_id, drivers)

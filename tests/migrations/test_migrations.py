@@ -97,3 +97,68 @@ def test_db_upgrade_command_migrates_the_configured_database(tmp_path, monkeypat
     engine = create_db_engine(url)
     check_schema_current(engine)
     engine.dispose()
+
+
+def test_0005_carries_n_t_over_into_named_responses(empty_url):
+    # A database made by the previous schema (0004), with a finished and a pending trial and a
+    # finished single simulation, as a session before named responses would have left it.
+    upgrade_database(empty_url, "0004")
+    engine = create_db_engine(empty_url)
+    now = "2026-11-20 10:00:00"
+    trial = (
+        "INSERT INTO trials (id, study_id, individual, generation, replicate, seed, params, scenario, "
+        "state, status, n_remaining, message, attempts, pareto, created_at, updated_at) VALUES "
+        "(:id, 's1', :i, 0, 0, 1, '{}', '{}', :state, :status, :n, '', 0, false, :now, :now)"
+    )
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                sa.text(
+                    "INSERT INTO studies (id, name, status, definition, generation, message, extra, "
+                    "created_at, updated_at) VALUES ('s1', 'old', 'done', '{}', 1, '', '{}', :now, :now)"
+                ),
+                {"now": now},
+            )
+            connection.execute(
+                sa.text(trial), {"id": "t1", "i": 0, "state": "done", "status": "ok", "n": 4, "now": now}
+            )
+            connection.execute(
+                sa.text(trial),
+                {"id": "t2", "i": 1, "state": "pending", "status": None, "n": None, "now": now},
+            )
+            connection.execute(
+                sa.text(
+                    "INSERT INTO simulations (id, scenario, params, seed, state, status, n_remaining, "
+                    "attempts, created_at, updated_at) "
+                    "VALUES ('m1', '{}', '{}', 0, 'done', 'ok', 7, 0, :now, :now)"
+                ),
+                {"now": now},
+            )
+        upgrade_database(empty_url)
+        with engine.connect() as connection:
+            trials = {
+                row.id: row
+                for row in connection.execute(
+                    sa.text("SELECT id, responses, engine, n_remaining FROM trials")
+                )
+            }
+            simulation = connection.execute(sa.text("SELECT responses, engine FROM simulations")).one()
+        assert _json(trials["t1"].responses) == {"n_remaining": 4} and trials["t1"].n_remaining == 4
+        assert _json(trials["t2"].responses) is None
+        assert {row.engine for row in trials.values()} == {"numba"}
+        assert _json(simulation.responses) == {"n_remaining": 7} and simulation.engine == "numba"
+        # And back: the previous schema again, its N_t untouched.
+        downgrade_database(empty_url, "0004")
+        with engine.connect() as connection:
+            columns = {c["name"] for c in sa.inspect(connection).get_columns("trials")}
+            assert "responses" not in columns and "engine" not in columns
+            assert connection.execute(sa.text("SELECT n_remaining FROM trials WHERE id = 't1'")).scalar() == 4
+    finally:
+        engine.dispose()
+
+
+def _json(value):
+    """A JSON column as read back by raw SQL: a dict on PostgreSQL, text on SQLite."""
+    import json
+
+    return json.loads(value) if isinstance(value, str) else value

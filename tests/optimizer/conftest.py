@@ -25,4 +25,5 @@ def paper_definition() -> StudyDefinition:
 
 @pytest.fixture
 def small_definition() -> StudyDefinition:
-    return make_definition(ga={"population": 8, "offspring": 4, "generations": 3})
+    """20 simulations, no validation (tests of the validation ask for it)."""
+    return make_definition(ga={"population": 8, "offspring": 4, "generations": 3}, validation={"seeds": 0})

@@ -29,11 +29,14 @@ def test_papers_protocol_runs_exactly_185_simulations(paper_definition):
     progress = Driver(store, executor).run_to_completion(study_id, poll_timeout=0)
 
     trials = store.trials(study_id)
+    search = [record for record in trials if record.spec.generation <= 9]
+    checks = [record for record in trials if record.spec.generation == 11]
     assert progress.status is StudyStatus.DONE
-    assert len(executor.submitted) == len(trials) == 185
-    assert Counter(record.spec.generation for record in trials) == {0: 50, **{g: 15 for g in range(1, 10)}}
-    assert store.load_study(study_id).generation == 10
-    assert progress.trials_done == progress.trials_planned == 185
+    assert len(search) == 185 and len(executor.submitted) == len(trials) == 185 + len(checks)
+    assert Counter(record.spec.generation for record in search) == {0: 50, **{g: 15 for g in range(1, 10)}}
+    assert len(checks) == 10 * len({record.spec.individual for record in checks}) <= 30
+    assert store.load_study(study_id).generation == 12
+    assert progress.trials_done == progress.trials_planned == len(trials)
 
 
 @pytest.fixture(params=["memory", "sqlite"])
@@ -73,7 +76,7 @@ def test_resume_after_kill_mid_generation_reruns_nothing_finished(small_definiti
     reference_id = start(reference_store, small_definition)
     reference = Driver(reference_store, SyntheticExecutor()).run_to_completion(reference_id, poll_timeout=0)
     assert progress.status is StudyStatus.DONE
-    assert sum(simulated.values()) == len(simulated) == 8 + 3 * 4
+    assert sum(simulated.values()) == len(simulated) == len(store.trials(study_id))
     assert set(results_per_trial(store, study_id).values()) == {1}
     assert progress.recommendation["params"] == reference.recommendation["params"]
 
@@ -109,7 +112,7 @@ def test_failed_simulations_are_penalised_and_the_study_goes_on(paper_definition
     progress = Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
 
     assert progress.status is StudyStatus.DONE
-    assert progress.trials_done == 185
+    assert sum(r.spec.generation <= 9 for r in store.trials(study_id)) == 185
     assert any(r.result.status is SimulationStatus.UNSTABLE for r in store.trials(study_id))
     assert progress.recommendation["params"]["E"] <= 1e8
 
@@ -132,18 +135,72 @@ def test_pause_withdraws_work_and_resume_finishes_the_same_budget(small_definiti
     assert sum(results_per_trial(store, study_id).values()) == 20
 
 
-def test_elite_reevaluation_adds_fresh_seeds_to_every_matching_set(small_definition):
-    definition = make_definition(ga={"population": 8, "offspring": 4, "generations": 3}, elite_reevaluation=2)
+def test_validation_reruns_the_fastest_matches_on_seeds_the_search_never_used():
+    definition = make_definition(
+        ga={"population": 8, "offspring": 4, "generations": 3}, validation={"seeds": 5, "candidates": 2}
+    )
     store = MemoryStore()
     study_id = start(store, definition)
 
     progress = Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
 
-    extra = [r for r in store.trials(study_id) if r.spec.generation == 4]
+    trials = store.trials(study_id)
+    fresh = [r for r in trials if r.spec.generation == definition.validation_batch()]
+    search_seeds = {r.spec.seed for r in trials if r.spec.generation < definition.validation_batch()}
     assert progress.status is StudyStatus.DONE
-    assert extra and {r.spec.replicate for r in extra} == {1, 2}
-    assert len(set(r.spec.seed for r in store.trials(study_id))) == len(store.trials(study_id))
-    assert len(progress.recommendation["n_remaining"]) == 3
+    assert 0 < len(fresh) <= 10 and len(fresh) % 5 == 0
+    assert not {r.spec.seed for r in fresh} & search_seeds
+    assert len({r.spec.seed for r in fresh}) == 5  # the same fresh seeds for every candidate
+    rows = progress.recommendation["validation"]
+    assert [row["individual"] for row in rows] == sorted({r.spec.individual for r in fresh}, key=[
+        row["individual"] for row in rows
+    ].index)
+    assert progress.recommendation["validation_status"] in ("validated", "not reproduced")
+    if progress.recommendation["validation_status"] == "validated":
+        validated = [row for row in rows if row["verdict"] == "validated"]
+        assert progress.recommendation["individual"] == validated[0]["individual"]
+        assert progress.recommendation["f2"] == min(row["f2"] for row in validated)
+    assert all(len(row["n_remaining"]) == 5 for row in rows)
+
+
+def test_common_random_numbers_replicate_r_has_one_seed_across_individuals():
+    definition = make_definition(
+        ga={"population": 6, "offspring": 3, "generations": 2}, replicates=3, validation={"seeds": 0}
+    )
+    store = MemoryStore()
+    study_id = start(store, definition)
+
+    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+
+    seeds: dict[int, set[int]] = {}
+    for record in store.trials(study_id):
+        seeds.setdefault(record.spec.replicate, set()).add(record.spec.seed)
+    assert sorted(seeds) == [0, 1, 2]
+    assert all(len(values) == 1 for values in seeds.values())
+    assert len({next(iter(values)) for values in seeds.values()}) == 3
+
+
+def test_extra_replicates_go_to_promising_sets_and_stay_within_the_budget():
+    definition = make_definition(
+        ga={"population": 10, "offspring": 5, "generations": 3},
+        replicates=2,
+        max_replicates=5,
+        budget=(10 + 15) * 2 + 12 + 2 * 4,
+        validation={"seeds": 4, "candidates": 2},
+    )
+    store = MemoryStore()
+    study_id = start(store, definition)
+
+    progress = Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+
+    trials = store.trials(study_id)
+    extra = [r for r in trials if 2 <= r.spec.replicate < 100]
+    assert progress.status is StudyStatus.DONE
+    assert len(trials) <= definition.total_simulations() == 70
+    assert 0 < len(extra) <= 12 and len(extra) % 3 == 0
+    per_individual = Counter(r.spec.individual for r in trials if r.spec.replicate < 100)
+    assert set(per_individual.values()) <= {2, 5}
+    assert progress.recommendation is None or progress.recommendation["replicates"] == 5
 
 
 def test_step_is_bounded_and_reports_progress(small_definition):
@@ -154,14 +211,15 @@ def test_step_is_bounded_and_reports_progress(small_definition):
     progress = driver.step(study_id, timeout=0)
 
     assert progress.status is StudyStatus.RUNNING
-    assert (progress.batch, progress.batches) == (0, 4)
+    assert (progress.batch, progress.batches) == (0, 6)
     assert (progress.trials_done, progress.trials_in_flight, progress.trials_planned) == (1, 7, 20)
 
 
-@pytest.mark.parametrize("algorithm", ["random", "spea2"])
+@pytest.mark.parametrize("algorithm", ["random", "spea2", "surrogate"])
 def test_other_algorithms_run_the_same_budget(algorithm):
     definition = make_definition(
-        ga={"algorithm": algorithm, "population": 8, "offspring": 4, "generations": 3}
+        ga={"algorithm": algorithm, "population": 8, "offspring": 4, "generations": 3},
+        validation={"seeds": 0},
     )
     store = MemoryStore()
     study_id = start(store, definition)
@@ -181,4 +239,69 @@ def test_study_whose_last_batch_was_saved_is_finished_on_restart(small_definitio
     progress = Driver(store, SyntheticExecutor()).step(study_id, timeout=0)
 
     assert progress.status is StudyStatus.DONE
-    assert len(store.trials(study_id)) == 20 and store.load_study(study_id).generation == 4
+    assert len(store.trials(study_id)) == 20 and store.load_study(study_id).generation == 6
+
+
+def test_surrogate_study_resumed_from_the_sql_store_proposes_what_an_uninterrupted_one_does(any_store):
+    definition = make_definition(
+        ga={"algorithm": "surrogate", "population": 6, "offspring": 3, "generations": 2},
+        validation={"seeds": 0},
+    )
+    reference_store = MemoryStore()
+    reference_id = start(reference_store, definition)
+    Driver(reference_store, SyntheticExecutor()).run_to_completion(reference_id, poll_timeout=0)
+
+    study_id = start(any_store, definition)
+    first = Driver(any_store, SyntheticExecutor())
+    while any_store.load_study(study_id).generation < 2:
+        first.step(study_id, timeout=0)
+    Driver(any_store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+
+    def proposals(store, sid):
+        return sorted((r.spec.individual, tuple(r.spec.params.values())) for r in store.trials(sid))
+
+    assert len(proposals(any_store, study_id)) == 6 + 2 * 3
+    assert [p for _, p in proposals(any_store, study_id)] == [
+        p for _, p in proposals(reference_store, reference_id)
+    ]
+
+
+def _invalid_when_soft(spec):
+    """Below E = 1e7 the runs are invalid, and would 'match' if their N_t were read."""
+    if spec.params["E"] < 1e7:
+        return SimulationResult(
+            status=SimulationStatus.INVALID, message="overlap", n_items=30, n_remaining=4, max_overlap=0.8
+        )
+    return synthetic_result(spec)
+
+
+def test_invalid_runs_are_never_on_the_front_and_never_recommended(small_definition):
+    store = MemoryStore()
+    study_id = start(store, small_definition)
+
+    driver = Driver(store, SyntheticExecutor(_invalid_when_soft))
+    progress = driver.run_to_completion(study_id, poll_timeout=0)
+
+    trials = {record.spec.trial_id: record for record in store.trials(study_id)}
+    invalid = {tid for tid, record in trials.items() if record.result.status is SimulationStatus.INVALID}
+    fronts = [set(ids) for _, _, ids in store.generations]
+    assert progress.status is StudyStatus.DONE
+    assert invalid and all(not front & invalid for front in fronts)
+    recommended = progress.recommendation
+    assert recommended is None or recommended["params"]["E"] >= 1e7
+
+
+def test_bounds_entirely_invalid_end_the_study_with_a_message_and_no_recommendation():
+    definition = make_definition(
+        ga={"population": 6, "offspring": 3, "generations": 3}, parameters={"E": {"low": 1e5, "high": 1e6}}
+    )
+    store, executor = MemoryStore(), SyntheticExecutor(_invalid_when_soft)
+    study_id = start(store, definition)
+
+    progress = Driver(store, executor).run_to_completion(study_id, poll_timeout=0)
+
+    assert progress.status is StudyStatus.FAILED
+    assert "all 6 sets of the initial population were invalid" in progress.message
+    assert "raise parameters.E" in progress.message
+    assert progress.recommendation is None
+    assert len(executor.submitted) == 6  # nothing after the initial population

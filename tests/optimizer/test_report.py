@@ -4,26 +4,89 @@ from __future__ import annotations
 
 import csv
 import json
+import statistics
+from collections import Counter
 
 from optimizer.driver import Driver
-from optimizer.memory import MemoryStore, SyntheticExecutor
+from optimizer.memory import MemoryStore, SyntheticExecutor, synthetic_result, synthetic_with_failures
 from optimizer.report import write_results
+
+TARGET = 4  # the paper's median 3.5, rounded half up
+
+
+def matching_where_mu_above(threshold: float):
+    """The synthetic feeder with N_t exactly on target where mu > threshold and 8 items off
+    elsewhere, so which trials match is known from their parameters alone, whatever the seed."""
+
+    def respond(spec):
+        n_remaining = TARGET if spec.params["mu"] > threshold else TARGET + 8
+        update = {"n_remaining": n_remaining, "responses": {"n_remaining": n_remaining}}
+        return synthetic_result(spec).model_copy(update=update)
+
+    return respond
+
+
+def run_and_write(tmp_path, definition, respond):
+    store = MemoryStore()
+    study_id = store.create_study(definition.model_dump(mode="json"))
+    Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
+    summary = write_results(tmp_path, store.load_study(study_id), store.trials(study_id))
+    return summary, list(csv.DictReader((tmp_path / "trials.csv").open()))
 
 
 def test_results_folder_holds_every_trial_and_the_recommendation(tmp_path, small_definition):
-    store = MemoryStore()
-    study_id = store.create_study(small_definition.model_dump(mode="json"))
-    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    summary, rows = run_and_write(tmp_path, small_definition, matching_where_mu_above(0.5))
 
-    summary = write_results(tmp_path, store.load_study(study_id), store.trials(study_id))
-
-    rows = list(csv.DictReader((tmp_path / "trials.csv").open()))
     assert len(rows) == summary["simulations"] == 20
     assert json.loads((tmp_path / "summary.json").read_text()) == summary
     assert (tmp_path / "pareto.png").read_bytes()[:4] == b"\x89PNG"
-    assert summary["target"] == 4.0
+    assert summary["target"] == TARGET
     assert [g["individuals"] for g in summary["generations"]] == [8, 4, 4, 4]
     pareto_ids = {tid for member in summary["pareto"] for tid in member["trial_ids"]}
     assert {row["trial_id"] for row in rows if row["pareto"] == "True"} == pareto_ids
-    assert summary["recommendation"]["f1"] <= 0.5  # seed 7 finds a match in 20 simulations
-    assert summary["simulations_until_first_match"] <= summary["recommendation"]["individual"] + 1
+    # The recommendation is the fastest matching trial, and the first match is counted in
+    # creation order, both read back from trials.csv.
+    matching = [row for row in rows if float(row["mu"]) > 0.5]
+    assert matching and len(matching) < len(rows)
+    assert all(float(row["f1"]) == 0 for row in matching)
+    fastest = min(matching, key=lambda row: float(row["f2"]))
+    assert summary["recommendation"]["trial_ids"] == [fastest["trial_id"]]
+    assert summary["recommendation"]["f1"] == 0
+    first = min(int(row["individual"]) for row in matching)
+    assert summary["simulations_until_first_match"] == first + 1
+
+
+def test_a_study_without_a_match_has_no_recommendation(tmp_path, small_definition):
+    summary, rows = run_and_write(tmp_path, small_definition, matching_where_mu_above(2.0))
+
+    assert len(rows) == 20
+    assert summary["recommendation"] is None
+    assert summary["simulations_until_first_match"] is None
+    assert summary["best_f1"] == 8
+
+
+def test_failed_runs_are_counted_by_status_and_never_shown_as_n_t(tmp_path, small_definition):
+    store = MemoryStore()
+    study_id = store.create_study(small_definition.model_dump(mode="json"))
+    Driver(store, SyntheticExecutor(synthetic_with_failures)).run_to_completion(study_id, poll_timeout=0)
+    records = store.trials(study_id)
+    failed = {r.spec.trial_id: r.result.status.value for r in records if not r.result.ok}
+
+    summary = write_results(tmp_path, store.load_study(study_id), records)
+
+    rows = {row["trial_id"]: row for row in csv.DictReader((tmp_path / "trials.csv").open())}
+    expected = Counter(failed.values())
+    assert set(expected) == {"unstable", "timeout"}  # the study exercises two statuses
+    assert summary["failures"]["by_status"] == dict(expected)
+    assert summary["failures"]["total"] == len(failed)
+    assert summary["failures"]["text"].startswith(f"failed: {len(failed)} (")
+    assert sum(g["failed"] for g in summary["generations"]) == len(failed)
+    for tid, status in failed.items():
+        assert rows[tid]["status"] == status
+        assert rows[tid]["n_remaining"] == "" and rows[tid]["f1"] == "" and rows[tid]["f2"] == ""
+        assert rows[tid]["failure"] == status
+    for entry in summary["generations"]:  # Fig. 5's numbers come from the ok runs alone
+        generation = [r for r in records if r.spec.generation == entry["generation"]]
+        ok = [r.result.n_remaining for r in generation if r.result.ok]
+        assert entry["n_remaining"] == {"median": statistics.median(ok), "min": min(ok), "max": max(ok)}
+    assert all(not member["failure"] for member in summary["pareto"])

@@ -24,7 +24,9 @@ def test_defaults_are_the_papers_protocol_of_185_simulations():
     assert definition.ga.offspring == 15
     assert definition.ga.generations == 9
     assert (definition.ga.crossover_prob, definition.ga.mutation_prob) == (0.98, 0.02)
-    assert definition.total_simulations() == 50 + 9 * 15
+    assert definition.search_simulations() == 50 + 9 * 15
+    # Then the recommendation and two more candidates on 10 fresh seeds each.
+    assert definition.total_simulations() == 185 + 3 * 10
 
 
 def test_paper_median_3_5_is_used_as_4_with_half_up():
@@ -81,11 +83,35 @@ def test_bad_scenario_key_is_named():
         make_definition(scenario={"vibration": {"amplitude": -1.0}})
 
 
-def test_limits_name_the_setting():
+def test_limits_name_the_setting_and_what_fits():
     definition = make_definition(replicates=3)
 
-    with pytest.raises(StudyLimitError, match="DEMCAL_MAX_SIMULATIONS"):
+    with pytest.raises(StudyLimitError, match="DEMCAL_MAX_SIMULATIONS") as refused:
         check_limits(definition, max_population=500, max_simulations=3 * 185 - 1)
+    assert "replicates <= 2" in str(refused.value)
     with pytest.raises(StudyLimitError, match="DEMCAL_MAX_POPULATION"):
         check_limits(definition, max_population=49, max_simulations=10_000)
-    check_limits(definition, max_population=50, max_simulations=3 * 185)
+    check_limits(definition, max_population=50, max_simulations=3 * 185 + 30)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "fits"),
+    [
+        ({"replicates": 3}, "replicates <= 1"),
+        ({"validation": {"seeds": 20}}, "validation.seeds <= 10"),
+        ({"ga": {"population": 90}}, "ga.population <= 50"),
+    ],
+)
+def test_a_budget_too_small_for_the_search_and_the_validation_says_what_fits(overrides, fits):
+    with pytest.raises(ValueError, match="budget = 215 simulations cannot hold") as refused:
+        make_definition(budget=215, **overrides)
+    assert fits in str(refused.value)
+
+
+def test_the_budget_beyond_the_search_and_the_validation_is_the_replicate_pool():
+    definition = make_definition(replicates=2, max_replicates=4, budget=500)
+
+    assert definition.replicate_pool() == 500 - 2 * 185 - 30
+    assert make_definition(replicates=2, max_replicates=4).replicate_pool() == 2 * 15
+    with pytest.raises(ValueError, match="max_replicates"):
+        make_definition(replicates=3, max_replicates=2)

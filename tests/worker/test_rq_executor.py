@@ -19,13 +19,14 @@ from rq.job import Job
 from rq.serializers import JSONSerializer
 
 from dem.result import SimulationResult, SimulationStatus
+from dem.scenarios import registry
 from optimizer.protocols import TrialSpec, trial_id
+from worker.local import DEFAULT_GRACE_S as LOCAL_GRACE_S
 from worker.rq_executor import (
     MAX_JOB_TIMEOUT_S,
     MIN_JOB_TIMEOUT_S,
     RedisQueueError,
     RqExecutor,
-    estimated_time_step,
     job_timeout,
 )
 from worker.rq_job import CancellationCheck, deliver, results_key
@@ -235,14 +236,27 @@ def test_an_unreachable_redis_is_an_error_naming_the_url():
 
 
 def test_job_timeout_is_the_deadline_with_a_margin_when_the_spec_has_one():
-    spec = make_spec("s1", 0, timeout_s=3600.0)
+    # A scenario whose estimate is far above every deadline below: the job timeout must follow
+    # the spec's deadline, not the estimate, and leave the run time to stop and report.
+    long_run = {"stages": {"vibration_time": 1e5}}  # the paper's 30 items
+    estimate = job_timeout(make_spec("s1", 0, scenario=long_run))
+    timeouts = {
+        deadline: job_timeout(make_spec("s1", 0, scenario=long_run, timeout_s=deadline))
+        for deadline in (1000.0, 3600.0, 7200.0)
+    }
 
-    assert job_timeout(spec) > 3600
+    for deadline, seconds in timeouts.items():
+        margin = seconds - deadline
+        # The run checks its deadline between chunks, then still has to deliver its result: at
+        # least the overrun the local pool allows before it kills a process.
+        assert margin >= LOCAL_GRACE_S, f"{deadline} s deadline: only {margin} s to stop and report"
+        assert seconds < estimate
+    assert timeouts[1000.0] < timeouts[3600.0] < timeouts[7200.0]
 
 
 def test_job_timeout_grows_with_simulated_time_and_has_a_floor_and_a_ceiling():
     def scenario(seconds: float) -> dict:
-        return {"stages": {"vibration_start": 1.0, "vibration_time": seconds}, "items": {"counts": {"a": 30}}}
+        return {"stages": {"vibration_start": 1.0, "vibration_time": seconds}}
 
     short = job_timeout(make_spec("s", 0, scenario=scenario(0.1)))
     paper = job_timeout(make_spec("s", 0, scenario=scenario(60.0)))
@@ -253,8 +267,9 @@ def test_job_timeout_grows_with_simulated_time_and_has_a_floor_and_a_ceiling():
 
 
 def test_estimated_time_step_scales_as_one_over_root_e():
-    soft = estimated_time_step({}, {"E": 1e6})
-    stiff = estimated_time_step({}, {"E": 4e6})
+    feeder = registry.get("feeder")
+    soft = feeder.time_step({}, {"E": 1e6})
+    stiff = feeder.time_step({}, {"E": 4e6})
 
     assert stiff == pytest.approx(soft / 2)
 
@@ -290,3 +305,24 @@ def test_a_cancelled_simulation_is_never_reported_even_by_another_service(connec
     outcomes = other_service.poll()
 
     assert outcomes == []
+
+
+def test_a_trial_for_an_engine_no_worker_has_waits_and_says_so(executor, connection):
+    from worker.rq_executor import engine_queues
+
+    spec = make_spec("s1", 0, engine="liggghts")
+    plain = make_spec("s1", 1)
+    executor.submit([spec, plain])
+
+    assert "liggghts" in executor.waiting() and "numba" not in executor.waiting()
+    assert "no worker takes queue 'demcal-test.liggghts'" in executor.waiting()["liggghts"]
+    run_worker_until_empty(connection)  # a worker without LIGGGHTS takes only the plain trial
+    assert [outcome.trial_id for outcome in executor.poll(timeout=1.0)] == [plain.trial_id]
+    assert spec.trial_id in executor.in_flight() and executor.queue_depth() == 1
+
+    # A worker that has the engine takes its queue; the result reaches the service as any other.
+    queues = engine_queues(QUEUE, ["numba", "command", "liggghts"])
+    assert queues == ["demcal-test.liggghts", QUEUE]
+    build_worker(connection, queues, heartbeat_s=2).work(burst=True, logging_level="WARNING")
+    assert [outcome.trial_id for outcome in executor.poll(timeout=1.0)] == [spec.trial_id]
+    assert executor.in_flight() == set()

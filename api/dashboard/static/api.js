@@ -114,9 +114,14 @@ export function poll(task, ms) {
   return () => { stopped = true; clearTimeout(timer); };
 }
 
+// The study's first experiment (definitions stored before several existed have "experiment").
+export function experimentOf(definition) {
+  return definition?.experiments?.[0] ?? definition?.experiment;
+}
+
 // The experiment's target with the study's own rule (optimizer/study.py Experiment.target).
 export function targetOf(definition) {
-  const exp = definition?.experiment;
+  const exp = experimentOf(definition);
   if (!exp?.measured?.length) return NaN;
   const v = [...exp.measured].sort((a, b) => a - b);
   const mid = Math.floor(v.length / 2);

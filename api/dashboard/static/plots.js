@@ -86,11 +86,64 @@ const X_AXES = {
   cost: { title: "cost (sphere-steps + contact-steps)", value: (t) => t.cost },
 };
 
-// Trace 0: every finished trial, coloured by generation. Trace 1: the Pareto members again, as
-// outlined diamonds on top, so the front stands out without relying on colour alone.
+// Runs that measured nothing (optimizer/outcomes.py): every status but "ok". Marker and colour
+// per status, as in pareto.png (optimizer/report.py FAILURE_STYLE); a status not listed gets
+// the fallback, so a new one is drawn without a change here.
+const FAILURE_STYLE = {
+  invalid: { symbol: "triangle-up", color: "#cc79a7" },
+  unstable: { symbol: "x", color: "#d55e00" },
+  timeout: { symbol: "square", color: "#e69f00" },
+  error: { symbol: "diamond", color: "#000000" },
+  cancelled: { symbol: "circle", color: "#999999" },
+};
+const FAILURE_FALLBACK = { symbol: "cross", color: "#56b4e9" };
+const failureStyle = (status) => FAILURE_STYLE[status] || FAILURE_FALLBACK;
+
+export function isFailed(trial) {
+  return trial.state === "done" && trial.status !== null && trial.status !== undefined && trial.status !== "ok";
+}
+
+// The status that failed each individual: its first failed replicate's (as the optimiser reads
+// it). Every trial of such an individual is drawn apart: its objectives are not measurements.
+export function individualFailures(trials) {
+  const failures = new Map();
+  const sorted = trials.filter(isFailed).sort((a, b) => a.individual - b.individual || a.replicate - b.replicate);
+  for (const t of sorted) if (!failures.has(t.individual)) failures.set(t.individual, t.status);
+  return failures;
+}
+
+// "failed: 3 (unstable 2, timeout 1)", counted over runs like every other view.
+export function failureCounts(trials) {
+  const counts = new Map();
+  for (const t of trials) if (isFailed(t)) counts.set(t.status, (counts.get(t.status) || 0) + 1);
+  const order = [...Object.keys(FAILURE_STYLE), ...[...counts.keys()].filter((s) => !(s in FAILURE_STYLE)).sort()];
+  const byStatus = order.filter((s) => counts.has(s)).map((s) => [s, counts.get(s)]);
+  const total = byStatus.reduce((sum, [, n]) => sum + n, 0);
+  const text = total ? `failed: ${total} (${byStatus.map(([s, n]) => `${s} ${n}`).join(", ")})` : "failed: 0";
+  return { total, byStatus, text };
+}
+
+const FAILED_HOVER =
+  "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br><b>%{customdata[7]}</b>: no N<sub>t</sub>, " +
+  "not ranked<br>E = %{customdata[1]:.3s}Pa<br>ν = %{customdata[2]:.3f}<br>e = %{customdata[3]:.3f}<br>" +
+  "μ = %{customdata[4]:.3f}<extra></extra>";
+
+function failedCustomdata(trials, failures) {
+  return trials.map((t) => [
+    t.id, t.params.E, t.params.nu, t.params.e, t.params.mu, "–", t.generation,
+    t.status === "ok" ? `${failures.get(t.individual)} (another replicate)` : t.status,
+  ]);
+}
+
+// Trace 0: every measured trial, coloured by generation. Trace 1: the Pareto members again, as
+// outlined diamonds on top, so the front stands out without relying on colour alone. Then one
+// trace per failed status, in a strip of its own above the plot at the runs' real x: they sit
+// apart from the measured points, never at a made-up f1.
 export function paretoFigure(trials, xKey, maxGeneration) {
   const x = X_AXES[xKey];
-  const shown = trials.filter((t) => Number.isFinite(t.f1) && Number.isFinite(x.value(t)));
+  const failures = individualFailures(trials);
+  const failedOf = (t) => t.state === "done" && failures.get(t.individual);
+  const shown = trials.filter((t) => !failedOf(t) && Number.isFinite(t.f1) && Number.isFinite(x.value(t)));
   const front = shown.filter((t) => t.pareto).sort((a, b) => x.value(a) - x.value(b));
   const type = shown.length > WEBGL_ABOVE ? "scattergl" : "scatter";
   const cmax = Math.max(1, maxGeneration);
@@ -115,18 +168,48 @@ export function paretoFigure(trials, xKey, maxGeneration) {
       cmin: 0, cmax, line: { width: 2, color: INK },
     },
   };
+  const failed = trials.filter((t) => failedOf(t) && Number.isFinite(x.value(t)));
+  const counts = failureCounts(trials);
+  const rows = counts.byStatus.map(([status]) => status);
+  const strips = rows.map((status) => {
+    const members = failed.filter((t) => failures.get(t.individual) === status);
+    const style = failureStyle(status);
+    return {
+      type, mode: "markers", name: `${status} (not ranked)`,
+      x: members.map(x.value), y: members.map(() => status), xaxis: "x", yaxis: "y2",
+      customdata: failedCustomdata(members, failures), hovertemplate: FAILED_HOVER,
+      marker: { symbol: style.symbol, size: 9, color: style.color, line: { width: 1, color: style.color } },
+    };
+  });
   const layout = baseLayout({
     xaxis: axis(x.title),
-    yaxis: axis("f1 = |N<sub>t</sub> − target| (items)", { range: fromZero(shown, (t) => t.f1) }),
+    yaxis: axis("f1 = |N<sub>t</sub> − target| (items)", {
+      range: fromZero(shown, (t) => t.f1), domain: rows.length ? [0, 0.78] : [0, 1],
+    }),
+    yaxis2: axis("", {
+      domain: [0.84, 1], type: "category", categoryarray: rows, visible: rows.length > 0,
+      showgrid: false, tickfont: { size: 11 },
+    }),
+    annotations: rows.length ? [{
+      xref: "paper", yref: "paper", x: 0, y: 1.0, xanchor: "left", yanchor: "bottom", showarrow: false,
+      text: `<b>${counts.text}</b> — no N<sub>t</sub>, drawn apart, not ranked`, font: { size: 12, color: INK },
+    }] : [],
+    legend: { orientation: "h", x: 0, y: -0.22, yanchor: "top" },
     hovermode: "closest",
     uirevision: xKey,
   });
-  return { data: [all, pareto], layout, hidden: trials.length - shown.length };
+  return {
+    data: [all, pareto, ...strips], layout, counts,
+    measured: shown.length, failed: failed.length,
+    hidden: trials.length - shown.length - failed.length,
+  };
 }
 
-// The paper's Fig. 5: N_t (a) and T (b) of every trial against generation, medians, target.
+// The paper's Fig. 5: N_t (a) and T (b) of every measured trial against generation, medians,
+// target; above (a), the failed runs of each generation stacked by status: a failed run has no
+// N_t (the API sends none) and its T is where it stopped, so neither panel draws it.
 export function generationFigure(trials, target, maxGeneration) {
-  const done = trials.filter((t) => t.state === "done");
+  const done = trials.filter((t) => t.state === "done" && !isFailed(t));
   const type = done.length > WEBGL_ABOVE ? "scattergl" : "scatter";
   const gens = done.map((t) => t.generation + jitter(t));
   const points = (y, axisSuffix) => ({
@@ -150,7 +233,19 @@ export function generationFigure(trials, target, maxGeneration) {
     points(done.map((t) => t.wall_time_s), "2"),
     medianTrace((t) => t.wall_time_s, "2"),
   ];
-  const shapes = [];
+  const counts = failureCounts(trials);
+  for (const [status] of counts.byStatus) {
+    const perGeneration = new Map();
+    for (const t of trials) {
+      if (isFailed(t) && t.status === status) perGeneration.set(t.generation, (perGeneration.get(t.generation) || 0) + 1);
+    }
+    const generations = [...perGeneration.keys()].sort((a, b) => a - b);
+    data.push({
+      type: "bar", name: `${status} runs`, x: generations, y: generations.map((g) => perGeneration.get(g)),
+      xaxis: "x3", yaxis: "y3", marker: { color: failureStyle(status).color }, width: 0.6,
+      hovertemplate: `generation %{x}<br>%{y} ${status} run(s): no N<sub>t</sub><extra></extra>`,
+    });
+  }
   if (Number.isFinite(target)) {
     data.push({
       type: "scatter", mode: "lines", name: `experimental target N<sub>t</sub> = ${fmt(target)}`,
@@ -158,21 +253,78 @@ export function generationFigure(trials, target, maxGeneration) {
       line: { color: TARGET, width: 2, dash: "dash" }, hoverinfo: "skip",
     });
   }
-  const genAxis = (title) => axis(title, { dtick: maxGeneration > 15 ? undefined : 1, range: [-0.6, maxGeneration + 0.6] });
+  const range = [-0.6, maxGeneration + 0.6];
+  const genAxis = (title, domain) => axis(title, { dtick: maxGeneration > 15 ? undefined : 1, range, domain });
   const layout = baseLayout({
-    grid: { rows: 1, columns: 2, pattern: "independent" },
-    xaxis: genAxis("generation"),
-    yaxis: axis("(a) items remaining N<sub>t</sub> (items)", {
+    xaxis: genAxis("generation", [0, 0.46]),
+    yaxis: axis("(a) measured N<sub>t</sub> (items)", {
+      domain: [0, 0.74],
       range: fromZero(done, (t) => Math.max(t.n_remaining ?? 0, Number.isFinite(target) ? target : 0)),
     }),
-    xaxis2: genAxis("generation"),
-    yaxis2: axis("(b) computation time T (s)", { range: fromZero(done, (t) => t.wall_time_s) }),
-    shapes,
+    xaxis2: genAxis("generation", [0.54, 1]),
+    yaxis2: axis("(b) computation time T (s)", { domain: [0, 1], range: fromZero(done, (t) => t.wall_time_s) }),
+    xaxis3: genAxis("", [0, 0.46]),
+    yaxis3: axis("failed runs", { domain: [0.8, 0.93], rangemode: "tozero", nticks: 3, title: { text: "failed<br>runs", font: { size: 11 } } }),
+    barmode: "stack",
+    annotations: [{
+      xref: "x3 domain", yref: "y3 domain", x: 0, y: 1, xanchor: "left", yanchor: "bottom", showarrow: false,
+      text: `${counts.text}${counts.total ? " — no N<sub>t</sub>, not in (a) or (b)" : ": every run measured N<sub>t</sub>"}`,
+      font: { size: 12, color: INK },
+    }],
     hovermode: "closest",
-    margin: { l: 64, r: 24, t: 40, b: 56 },
+    margin: { l: 64, r: 24, t: 64, b: 56 },
     uirevision: "keep", // a zoom survives the next poll's redraw
   });
-  return { data, layout };
+  layout.xaxis3.showticklabels = false;
+  layout.xaxis3.anchor = "y3";
+  layout.xaxis2.anchor = "y2";
+  layout.yaxis2.anchor = "x2";
+  layout.yaxis3.anchor = "x3";
+  return { data, layout, counts };
+}
+
+// Progress against simulations (GET /studies/{id}/progress): the hypervolume of what was
+// measured (left axis, a fraction of the study's fixed reference box) and the best f1 and best
+// validated f1 (right axis, items), one point per completed batch.
+export function progressFigure(progress) {
+  const points = progress.points || [];
+  const sims = points.map((p) => p.simulations);
+  const data = [
+    {
+      type: "scatter", mode: "lines+markers", name: "hypervolume", x: sims, y: points.map((p) => p.hypervolume),
+      line: { color: TARGET, width: 3 }, marker: { size: 7, color: TARGET },
+      hovertemplate: "%{x} simulations<br>hypervolume %{y:.3f}<extra></extra>",
+    },
+    {
+      type: "scatter", mode: "lines+markers", name: "best f1", x: sims, y: points.map((p) => p.best_f1),
+      yaxis: "y2", line: { color: MEDIAN, width: 2, shape: "hv" }, marker: { size: 6, color: MEDIAN },
+      hovertemplate: "%{x} simulations<br>best f1 %{y:.3g} items<extra></extra>",
+    },
+    {
+      type: "scatter", mode: "lines+markers", name: "best validated f1", x: sims,
+      y: points.map((p) => p.best_validated_f1), yaxis: "y2",
+      line: { color: "#009e73", width: 2, dash: "dot", shape: "hv" }, marker: { size: 8, symbol: "star", color: "#009e73" },
+      hovertemplate: "%{x} simulations<br>best validated f1 %{y:.3g} items<extra></extra>",
+    },
+  ];
+  const ref = progress.reference;
+  const f1Top = Math.max(1, ...points.flatMap((p) => [p.best_f1, p.best_validated_f1]).filter(Number.isFinite));
+  const layout = baseLayout({
+    xaxis: axis("simulations", { rangemode: "tozero" }),
+    yaxis: axis("hypervolume (fraction of the reference box)", { range: [0, 1.02] }),
+    yaxis2: axis("f1 (items)", {
+      overlaying: "y", side: "right", showgrid: false, tickmode: "auto", nticks: 6,
+      range: [-0.02 * f1Top, 1.05 * f1Top],
+    }),
+    margin: { l: 64, r: 64, t: 28, b: 56 },
+    hovermode: "x unified",
+    uirevision: "keep",
+  });
+  const caption = ref
+    ? `Reference point (fixed once the initial population is complete): f1 = ${fmt(ref.f1)} items, ` +
+      `f2 = ${fmt(ref.f2)} (1.1 × the initial population's largest).`
+    : "No point yet: the hypervolume's reference is fixed when the initial population is complete.";
+  return { data, layout, caption };
 }
 
 // One panel per searched parameter: values against generation with the median; fixed ones
@@ -180,8 +332,14 @@ export function generationFigure(trials, target, maxGeneration) {
 // 10,000 coloured points cost seconds to draw, and the boxes show the narrowing just as well.
 export function parameterFigure(trials, bounds, maxGeneration) {
   const free = PARAMETERS.filter((p) => !bounds[p.key] || bounds[p.key].fixed == null);
-  const done = trials.filter((t) => t.params && t.state !== "cancelled");
-  const boxes = done.length > WEBGL_ABOVE;
+  const all = trials.filter((t) => t.params && t.state !== "cancelled");
+  const boxes = all.length > WEBGL_ABOVE;
+  // Where the search went (all proposals, for the medians and boxes); the points are coloured by
+  // f1 only where it is a measurement, failed individuals are grey crosses apart from the scale.
+  const failures = individualFailures(trials);
+  const failedOf = (t) => t.state === "done" && failures.has(t.individual);
+  const done = all.filter((t) => !failedOf(t));
+  const failed = all.filter(failedOf);
   const gens = done.map((t) => t.generation + jitter(t));
   const data = [];
   const layout = baseLayout({
@@ -195,7 +353,7 @@ export function parameterFigure(trials, bounds, maxGeneration) {
     if (boxes) {
       data.push({
         type: "box", name: "trials (quartiles, 1.5 IQR whiskers)", showlegend: i === 0,
-        x: done.map((t) => t.generation), y: done.map((t) => t.params[p.key]),
+        x: all.map((t) => t.generation), y: all.map((t) => t.params[p.key]),
         xaxis: "x" + suffix, yaxis: "y" + suffix, boxpoints: false,
         fillcolor: "rgba(86, 180, 233, 0.35)", line: { color: "#0072b2", width: 1.2 },
       });
@@ -208,8 +366,15 @@ export function parameterFigure(trials, bounds, maxGeneration) {
           cmin: 0, showscale: i === 0, line: { width: 0.6, color: "#3b3b3b" },
           colorbar: { title: { text: "f1 (items)" }, thickness: 12, len: 0.8 } },
       });
+      data.push({
+        type: "scatter", mode: "markers", name: "failed (no N<sub>t</sub>)", showlegend: i === 0,
+        x: failed.map((t) => t.generation + jitter(t)), y: failed.map((t) => t.params[p.key]),
+        xaxis: "x" + suffix, yaxis: "y" + suffix,
+        customdata: failedCustomdata(failed, failures), hovertemplate: FAILED_HOVER,
+        marker: { size: 7, symbol: "x-thin", color: "#8c959f", line: { width: 1.5, color: "#8c959f" } },
+      });
     }
-    const m = byGeneration(done, (t) => t.params[p.key]);
+    const m = byGeneration(all, (t) => t.params[p.key]);
     data.push({
       type: "scatter", mode: "lines+markers", name: "median per generation", showlegend: i === 0,
       x: m.x, y: m.y, xaxis: "x" + suffix, yaxis: "y" + suffix,

@@ -1,13 +1,17 @@
 // The study page: header and progress, the Pareto front, the paper's Fig. 5 generation plot,
-// parameters by generation, the recommendation, and the pause/resume/cancel/export buttons.
+// progress against simulations, parameters by generation, which parameters the experiment pins
+// down, the recommendation, and the pause/resume/cancel/export buttons. Runs that measured
+// nothing are drawn apart and counted by status in every plot (plots.js failureCounts).
 // Trials are loaded once, then polled incrementally with ?updated_since= (only what changed)
 // and upserted by id, so a running study costs one small request every few seconds.
 
 import {
   ApiError, PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, poll,
-  plotlyReady, showBanner, statusBadge, targetOf,
+  plotlyReady, showBanner, statusBadge, targetOf, experimentOf,
 } from "./api.js";
-import { CONFIG, generationFigure, paretoFigure, parameterFigure } from "./plots.js";
+import {
+  CONFIG, generationFigure, paretoFigure, parameterFigure, progressFigure,
+} from "./plots.js";
 
 const studyId = document.getElementById("study").dataset.studyId;
 const base = `/studies/${encodeURIComponent(studyId)}`;
@@ -53,13 +57,17 @@ function renderHeader() {
   const facts = [
     ["Study id", study.id],
     ["Progress", `${p.trials_done} / ${p.trials_total} trials`],
+    ["Failed runs", p.failures ? p.failures.text.replace(/^failed: /, "") : "–"],
     ["Generation", generationText(p.generation, p.generations_total)],
-    ["Target N_t", `${fmt(targetOf(def))} items (tolerance ±${fmt(def.experiment?.tolerance ?? NaN)})`],
-    ["Measured N_t", (def.experiment?.measured || []).join(", ")],
+    ["Target N_t", `${fmt(targetOf(def))} items (tolerance ±${fmt(experimentOf(def)?.tolerance ?? NaN)})`],
+    ["Measured N_t", (experimentOf(def)?.measured || []).join(", ")],
     ["Objective f2", def.objective_time === "wall" ? "wall time T (s)" : "cost (machine-independent)"],
     ["Created", fmtTime(study.created_at)],
     ["Updated", fmtTime(study.updated_at)],
   ];
+  const warnings = document.getElementById("study-warnings");
+  warnings.hidden = !(study.warnings || []).length;
+  warnings.replaceChildren(...(study.warnings || []).map((w) => el("p", { text: `Warning: ${w}` })));
   const dl = document.getElementById("study-facts");
   dl.replaceChildren(...facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
   if (study.message) dl.append(el("dt", { text: "Message" }), el("dd", { text: study.message }));
@@ -73,9 +81,10 @@ function renderHeader() {
 
 function maxGeneration() {
   const planned = study?.progress?.generations_total ?? 0;
+  if (planned > 0) return planned; // batches after the last generation re-measure, they do not search
   let seen = 0;
   for (const t of trials.values()) seen = Math.max(seen, t.generation);
-  return Math.max(planned, seen);
+  return seen;
 }
 
 // The Pareto front first (it is what the page is for); the two figures below the fold are
@@ -90,14 +99,21 @@ async function renderPlots() {
   const caption = document.getElementById("pareto-caption");
   const pending = pareto.hidden;
   caption.textContent =
-    `${pareto.data[0].x.length} finished trials, coloured by generation; ` +
-    `${pareto.data[1].x.length} Pareto members are outlined diamonds. Click a point to open its trial.` +
-    (pending ? ` ${pending} trials not shown (not finished yet, or failed without objectives).` : "");
+    `${pareto.measured} measured trials, coloured by generation; ` +
+    `${pareto.data[1].x.length} Pareto members are outlined diamonds. ` +
+    (pareto.counts.total
+      ? `Above, apart: ${pareto.counts.text}; their trials (${pareto.failed}) have no N_t and are not ranked. `
+      : "Every finished run measured N_t. ") +
+    "Click a point to open its trial." +
+    (pending ? ` ${pending} trials not shown (not finished yet).` : "");
   if (!performance.getEntriesByName("demcal:pareto-drawn").length) performance.mark("demcal:pareto-drawn");
   await new Promise((resolve) => requestAnimationFrame(() => setTimeout(resolve, 0)));
-  const gen = generationFigure(list, targetOf(study.definition), gmax);
+  // Fig. 5 and the parameters are the search's generations; extra replicates and the validation
+  // (later batches) are shown in the recommendation and validation tables.
+  const searched = list.filter((t) => t.generation <= gmax);
+  const gen = generationFigure(searched, targetOf(study.definition), gmax);
   Plotly.react("generation-plot", gen.data, gen.layout, CONFIG);
-  const par = parameterFigure(list, study.definition?.parameters || {}, gmax);
+  const par = parameterFigure(searched, study.definition?.parameters || {}, gmax);
   Plotly.react("parameter-plot", par.data, par.layout, CONFIG);
   // For benchmarks/dashboard_render.py: the first moment every plot of the study is drawn.
   if (!performance.getEntriesByName("demcal:plots-drawn").length) performance.mark("demcal:plots-drawn");
@@ -106,6 +122,15 @@ async function renderPlots() {
 function paramCells(params) {
   return PARAMETERS.map((p) => el("td", { class: "num", text: fmt(params?.[p.key], 4) }));
 }
+
+// The N_t of every measured run of an individual (its replicates), from the trials loaded.
+function runsOf(individual) {
+  const runs = [...trials.values()].filter((t) => t.individual === individual && t.state === "done");
+  return { runs: runs.length, nt: runs.filter((t) => t.n_remaining !== null).map((t) => t.n_remaining) };
+}
+
+const interval = (pair, digits = 2) => (pair ? `[${fmt(pair[0], digits)}–${fmt(pair[1], digits)}]` : "");
+const VALIDATION_CLASS = { validated: "ok", "not reproduced": "failed", "not validated": "paused" };
 
 async function renderRecommendation() {
   const body = await api(`${base}/recommendation`);
@@ -118,26 +143,99 @@ async function renderRecommendation() {
   } else {
     const params = rec.params || {};
     const rows = PARAMETERS.map((p) => [p.title, fmt(params[p.key], 4)]);
-    for (const [key, label] of [["n_remaining", "N_t (items)"], ["f1", "f1 (items)"],
-      ["wall_time_s", "T (s)"], ["cost", "cost"]]) {
+    if (Array.isArray(rec.n_remaining)) rows.push(["N_t per replicate (items)", rec.n_remaining.join(", ") || "–"]);
+    else if (rec.n_remaining !== undefined && rec.n_remaining !== null) rows.push(["N_t (items)", fmt(rec.n_remaining)]);
+    if (rec.f1 !== undefined && rec.f1 !== null) {
+      rows.push(["f1 (items)", `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
+    }
+    if (rec.replicates) rows.push(["replicates in the search", String(rec.replicates)]);
+    for (const [key, label] of [["wall_time_s", "T (s)"], ["cost", "cost"]]) {
       if (rec[key] !== undefined && rec[key] !== null) rows.push([label, fmt(rec[key], 4)]);
     }
     const trialId = (rec.trial_ids || [])[0]; // optimizer.pareto.summary: every replicate of the set
     const dl = el("dl", { class: "facts" }, ...rows.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
+    const verdict = rec.validation_status;
     box.replaceChildren(
-      el("p", { text: "The fastest Pareto member whose N_t matches the experiment within tolerance:" }),
+      el("p", { text: verdict ? "The fastest validated parameter set (fresh seeds, table below):"
+        : "The fastest Pareto member whose N_t matches the experiment within tolerance:" }),
+      verdict ? el("p", { id: "validation-status" }, "Validation: ",
+        el("span", { class: `status ${VALIDATION_CLASS[verdict] || ""}`, text: verdict })) : null,
       dl,
       trialId ? el("p", {}, el("a", { href: `/trials/${encodeURIComponent(trialId)}`, text: `open trial ${trialId}` })) : null,
     );
   }
+  renderValidation(rec?.validation || [], study?.definition?.experiment?.measured || []);
   const tbody = document.querySelector("#equivalent tbody");
-  const rows = (body.equivalent || []).map((t) => el("tr", {},
-    el("td", {}, el("a", { href: `/trials/${encodeURIComponent(t.id)}`, text: `g${t.generation} · i${t.individual}` })),
-    ...paramCells(t.params),
-    el("td", { class: "num", text: fmt(t.n_remaining) }),
-    el("td", { class: "num", text: fmt(t.wall_time_s) })));
+  const rows = (body.equivalent || []).map((t) => {
+    const { runs, nt } = runsOf(t.individual);
+    return el("tr", {},
+      el("td", {}, el("a", { href: `/trials/${encodeURIComponent(t.id)}`, text: `g${t.generation} · i${t.individual}` })),
+      ...paramCells(t.params),
+      el("td", { class: "num", text: nt.length ? nt.join(", ") : "–" }),
+      el("td", { class: "num", text: String(runs) }),
+      el("td", { class: "num", text: fmt(t.wall_time_s) }));
+  });
   tbody.replaceChildren(...(rows.length ? rows
-    : [el("tr", {}, el("td", { colspan: 7, class: "muted", text: "None yet." }))]));
+    : [el("tr", {}, el("td", { colspan: 8, class: "muted", text: "None yet." }))]));
+}
+
+// The validation that ends a study (optimizer/validation.py): each candidate's fresh-seed N_t
+// against the experiment, with W1, the median and f1 with their bootstrap intervals.
+function renderValidation(rows, measured) {
+  const section = document.getElementById("validation");
+  section.hidden = rows.length === 0;
+  if (!rows.length) return;
+  const sorted = [...measured].sort((a, b) => a - b);
+  const mid = Math.floor(sorted.length / 2);
+  const median = sorted.length % 2 ? sorted[mid] : (sorted[mid - 1] + sorted[mid]) / 2;
+  document.getElementById("validation-caption").textContent =
+    `Experiment: N_t ${measured.join(", ")} (median ${fmt(median)}). Each candidate re-simulated on ` +
+    "seeds never used in the search; validated when every fresh run measured and the fresh f1 " +
+    "interval reaches the tolerance.";
+  document.querySelector("#validation-table tbody").replaceChildren(...rows.map((row) => el("tr",
+    { "data-individual": row.individual },
+    el("td", { text: `i${row.individual}` }),
+    ...paramCells(row.params),
+    el("td", { class: "num", text: fmt(row.search_f1, 3) }),
+    el("td", { class: "num", text: (row.n_remaining || []).join(", ") +
+      (row.failures?.length ? ` + ${row.failures.length} failed` : "") }),
+    el("td", { class: "num", text: `${fmt(row.median)} ${interval(row.median_interval)}`.trim() }),
+    el("td", { class: "num", text: fmt(row.w1, 3) }),
+    el("td", { class: "num", text: `${fmt(row.f1, 3)} ${interval(row.f1_interval)}`.trim() }),
+    el("td", {}, el("span", { class: `status ${VALIDATION_CLASS[row.verdict] || ""}`, text: row.verdict })))));
+}
+
+async function renderProgress() {
+  const [progress, identified] = await Promise.all([
+    api(`${base}/progress`), api(`${base}/identifiability`),
+  ]);
+  await plotlyReady();
+  const figure = progressFigure(progress);
+  Plotly.react("progress-plot", figure.data, figure.layout, CONFIG);
+  document.getElementById("progress-caption").textContent = figure.caption;
+  renderIdentifiability(identified);
+}
+
+const VERDICT_CLASS = { pinned: "ok", weak: "paused", "not identifiable": "failed" };
+
+function renderIdentifiability(identified) {
+  const entries = identified.parameters || [];
+  document.getElementById("identifiability-basis").textContent = entries.length
+    ? `From ${identified.simulations} successful simulations: ${identified.method}.`
+    : (identified.reason || "Not available yet.");
+  const rows = entries.map((entry) => {
+    const p = PARAMETERS.find((q) => q.key === entry.name);
+    const range = entry.matching_range;
+    return el("tr", { "data-parameter": entry.name },
+      el("td", { text: p ? p.title : entry.name }),
+      el("td", {}, el("span", { class: `status ${VERDICT_CLASS[entry.verdict] || ""}`, text: entry.verdict })),
+      el("td", { class: "num", text: fmt(entry.total, 2) }),
+      el("td", { class: "num", text: fmt(entry.first_order, 2) }),
+      el("td", { class: "num", text: fmt(entry.matching_spread, 2) }),
+      el("td", { class: "num", text: range ? `${fmt(range[0], 3)} – ${fmt(range[1], 3)}` : "–" }));
+  });
+  document.querySelector("#identifiability tbody").replaceChildren(...(rows.length ? rows
+    : [el("tr", {}, el("td", { colspan: 6, class: "muted", text: "None yet." }))]));
 }
 
 async function refresh() {
@@ -158,7 +256,7 @@ async function refresh() {
   }
   if (changed) await renderPlots();
   if (changed || study.progress.generation !== recommendationGeneration) {
-    await renderRecommendation();
+    await Promise.all([renderRecommendation(), renderProgress()]);
     recommendationGeneration = study.progress.generation;
   }
   clearBanner();

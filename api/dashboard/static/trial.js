@@ -24,7 +24,8 @@ function facts(trial) {
     ["seed", trial.seed],
     ["generation · individual · replicate", `${trial.generation} · ${trial.individual} · ${trial.replicate}`],
     ["state / simulation status", `${trial.state} / ${trial.status ?? "–"}`],
-    ["items remaining N_t", trial.n_remaining !== null ? `${trial.n_remaining} of ${r.n_items ?? "?"} items` : "–"],
+    ["items remaining N_t", trial.n_remaining !== null ? `${trial.n_remaining} of ${r.n_items ?? "?"} items`
+      : (trial.status && trial.status !== "ok" ? `none: the run ended ${trial.status}, it measured nothing` : "–")],
     ["f1 = |N_t − target|", trial.f1 !== null ? `${fmt(trial.f1)} items` : "–"],
     ["Pareto member", trial.pareto ? "yes" : "no"],
     ["wall time T", fmtSeconds(trial.wall_time_s)],

@@ -1,4 +1,4 @@
-"""Snapshots (npz) and the VTK export of spheres and walls."""
+"""The VTK export of spheres and walls."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import numpy as np
 from dem.clump import Clump
 from dem.contact import ContactParams
 from dem.simulation import Simulation
-from dem.snapshots import SnapshotRecorder, load
 from dem.vtk import write_spheres, write_walls
 from dem.walls import WallMesh
 
@@ -30,20 +29,6 @@ def falling_pair() -> Simulation:
     sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 0.2))
     sim.add_body(clump, (0, 0, 0.05))
     return sim
-
-
-def test_snapshots_at_interval_hold_free_fall_positions(tmp_path):
-    sim = falling_pair()
-    recorder = SnapshotRecorder(interval=0.02)
-
-    sim.run(0.06, chunk_time=0.01, on_chunk=recorder)
-    data = load(recorder.save(tmp_path / "run.npz"))
-
-    assert len(data["t"]) == 3
-    assert np.allclose(data["t"], [0.02, 0.04, 0.06], atol=sim.dt)
-    expected = 0.05 - 0.5 * 9.81 * data["t"] ** 2  # before touching the floor
-    assert np.allclose(data["pos"][:, 0, 2], expected, atol=1e-6)
-    assert data["sphere_radius"].shape == (2,)
 
 
 def test_vtk_files_list_every_sphere_and_wall_triangle(tmp_path):

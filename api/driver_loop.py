@@ -1,13 +1,12 @@
-"""The background loop of ``demcal serve``: it advances every running study and runs every
-pending single simulation through the executor, and keeps the database and the queue in step.
+"""The driver loop, the background thread of ``demcal serve``: it advances every running study
+and runs every pending single simulation through the executor, and keeps the database and the
+queue in step. (Not to be confused with ``api/services/``, the request services of the API.)
 
-* **One driver per study, whatever the number of replicas.** A study is advanced only by the
-  ``serve`` process holding its lease: a Redis key ``demcal:lease:<study>`` set with ``NX`` and an
-  expiry (``LEASE_TTL_S``), renewed at every tick by its holder and released when the study ends
-  or the process stops. A replica that dies stops renewing, so its studies are taken over by
-  another within ``LEASE_TTL_S``. If Redis is flushed, the holder re-takes its leases at its next
-  tick (a second or so), before any other replica's next scan (``scan_every_s``). Without Redis
-  (embedded executor) there is one serve process by construction and the lease is local.
+* **One driver per study, whatever the number of replicas or CLI runs.** A study is advanced
+  only by the process holding its lease in the database (``api/store/leases.py``, the same lease
+  ``demcal calibrate`` takes), renewed a few times per TTL and released when the study ends or
+  the process stops; a process that dies loses its studies to a ``serve`` replica within
+  ``DEMCAL_LEASE_TTL_S``.
 * **Reconciliation**, on start and periodically (``reconcile_every_s``): the driver re-submits
   trials the database holds as queued or running but the executor does not know (a flushed or
   restarted Redis, a restarted process with a local pool); this loop also lets the executor move
@@ -23,94 +22,44 @@ Must not: serve HTTP or know the GA; it only composes the driver, the store and 
 from __future__ import annotations
 
 import logging
-import os
-import socket
 import threading
 import time
-import uuid
 from collections.abc import Sequence
 from typing import Any
 
+import redis
 import sqlalchemy as sa
 
 from api.errors import NotFoundError
 from api.models import SimulationRow
 from api.settings import Settings
 from api.store import SqlStore
+from api.store.leases import DatabaseLeases
 from optimizer.driver import Driver
-from optimizer.protocols import Executor, StudyStatus, TrialOutcome, TrialSpec, TrialState
+from optimizer.protocols import (
+    Executor,
+    StudyStatus,
+    TrialOutcome,
+    TrialSpec,
+    TrialState,
+    is_trial_of,
+)
 
 logger = logging.getLogger(__name__)
 
-LEASE_TTL_S = 30.0
 ACTIVE_STUDIES = (StudyStatus.CREATED, StudyStatus.RUNNING)
 # Statuses whose in-flight work the driver must withdraw (it does so when stepped once more).
 STOPPING_STUDIES = (StudyStatus.PAUSED, StudyStatus.CANCELLED)
-
-
-def owner_id() -> str:
-    """This process, as lease holders are named: readable in Redis, unique per start."""
-    return f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
-
-
-class RedisLeases:
-    """Study leases in Redis: ``SET NX PX`` to take, compare-and-expire to renew, compare-and-
-    delete to release (Lua, so that a holder never renews or frees a lease it lost)."""
-
-    _RENEW = """
-    local holder = redis.call('GET', KEYS[1])
-    if holder == ARGV[1] then
-        return redis.call('PEXPIRE', KEYS[1], ARGV[2])
-    elseif not holder then
-        return redis.call('SET', KEYS[1], ARGV[1], 'NX', 'PX', ARGV[2]) and 1 or 0
-    end
-    return 0
-    """
-    _RELEASE = """
-    if redis.call('GET', KEYS[1]) == ARGV[1] then return redis.call('DEL', KEYS[1]) end
-    return 0
-    """
-
-    def __init__(self, connection, owner: str, ttl_s: float = LEASE_TTL_S) -> None:
-        self._redis = connection
-        self.owner = owner
-        self._ttl_ms = int(ttl_s * 1000)
-        self._renew = connection.register_script(self._RENEW)
-        self._release = connection.register_script(self._RELEASE)
-
-    @staticmethod
-    def key(study_id: str) -> str:
-        return f"demcal:lease:{study_id}"
-
-    def acquire(self, study_id: str) -> bool:
-        return bool(self._redis.set(self.key(study_id), self.owner, nx=True, px=self._ttl_ms))
-
-    def renew(self, study_id: str) -> bool:
-        """Extend a lease we hold, or take it back if it vanished (Redis flushed)."""
-        return bool(self._renew(keys=[self.key(study_id)], args=[self.owner, self._ttl_ms]))
-
-    def release(self, study_id: str) -> None:
-        self._release(keys=[self.key(study_id)], args=[self.owner])
-
-    def holder(self, study_id: str) -> str | None:
-        value = self._redis.get(self.key(study_id))
-        return value.decode() if isinstance(value, bytes) else value
-
-
-class LocalLeases:
-    """Leases when there is no Redis: the embedded mode has one serve process, which holds all."""
-
-    def __init__(self, owner: str) -> None:
-        self.owner = owner
-
-    def acquire(self, study_id: str) -> bool:
-        return True
-
-    def renew(self, study_id: str) -> bool:
-        return True
-
-    def release(self, study_id: str) -> None:
-        return None
+# Errors of the database or Redis themselves: they end the tick (retried later), never a study.
+INFRASTRUCTURE_ERRORS = (
+    sa.exc.OperationalError,
+    sa.exc.InterfaceError,
+    sa.exc.TimeoutError,
+    redis.exceptions.ConnectionError,
+    redis.exceptions.TimeoutError,
+    ConnectionError,
+    TimeoutError,
+)
 
 
 class _Routed:
@@ -151,14 +100,14 @@ class _Routed:
         return True
 
 
-class StudyService:
+class DriverLoop:
     """Advances studies and single simulations in a background thread; see the module docstring."""
 
     def __init__(
         self,
         store: SqlStore,
         executor: Executor,
-        leases: RedisLeases | LocalLeases,
+        leases: DatabaseLeases,
         *,
         poll_s: float = 0.5,
         scan_every_s: float = 5.0,
@@ -175,13 +124,14 @@ class StudyService:
         self.held: set[str] = set()
         self._last_scan = -float("inf")
         self._last_reconcile = -float("inf")
+        self._last_renew = -float("inf")
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
     # -- life cycle ---------------------------------------------------------------------------
 
     def start(self) -> None:
-        self._thread = threading.Thread(target=self.run, name="demcal-service", daemon=True)
+        self._thread = threading.Thread(target=self.run, name="demcal-driver-loop", daemon=True)
         self._thread.start()
 
     def stop(self, timeout: float = 30.0) -> None:
@@ -215,23 +165,54 @@ class StudyService:
             self._last_reconcile = now
             self._reconcile_simulations()
         self._submit_simulations()
+        self._mark_running()
         if self.held:
             share = self.poll_s / len(self.held)
             for study_id in sorted(self.held):
-                progress = self.driver.step(study_id, timeout=share)
-                if not progress.active:
-                    logger.info("study %s: %s; releasing it", study_id, progress.status)
-                    self._drop(study_id)
+                self._step(study_id, share)
         else:
             self._routed.simulation_outcomes.extend(self._routed.poll(self.poll_s))
         self._record_simulations()
+
+    def _step(self, study_id: str, timeout: float) -> None:
+        """One step of one study, isolated: whatever goes wrong with this study (a definition it
+        cannot compute with, a bug) fails this study with its message and withdraws its work;
+        the other studies go on. Only an outage of the database or Redis ends the tick."""
+        try:
+            progress = self.driver.step(study_id, timeout=timeout)
+        except NotFoundError:
+            logger.info("study %s: deleted; withdrawing its work", study_id)
+            self._withdraw(study_id)
+            self._drop(study_id)
+            return
+        except INFRASTRUCTURE_ERRORS:
+            raise
+        except Exception as exc:
+            logger.exception("study %s: the driver failed on it; failing this study only", study_id)
+            message = f"the driver failed on this study: {type(exc).__name__}: {exc}"
+            self.store.set_status(study_id, StudyStatus.FAILED, message[:2000])
+            self._withdraw(study_id)
+            self._drop(study_id)
+            return
+        if not progress.active:
+            logger.info("study %s: %s; releasing it", study_id, progress.status)
+            if progress.status is not StudyStatus.DONE:
+                self._withdraw(study_id)
+            self._drop(study_id)
+
+    def _withdraw(self, study_id: str) -> None:
+        """Remove the study's queued jobs and stop its running ones, from what the executor holds
+        (not what the store says: the study may be deleted, its trials marked cancelled)."""
+        doomed = sorted(trial for trial in self.executor.in_flight() if is_trial_of(trial, study_id))
+        if doomed:
+            logger.info("study %s: withdrawing %d queued or running trials", study_id, len(doomed))
+            self.executor.cancel(doomed)
 
     def _scan(self) -> None:
         """Take leases of active studies nobody drives; let go of studies that stopped."""
         maintain = getattr(self.executor, "maintain", None)
         if maintain is not None:
             maintain()
-        self._mark_running()
         active = set(self.store.studies_in(ACTIVE_STUDIES))
         stopping = set(self.store.studies_in(STOPPING_STUDIES))
         for study_id in sorted(active - self.held):
@@ -240,8 +221,9 @@ class StudyService:
                 self._watch(study_id)
                 self.held.add(study_id)
         for study_id in sorted(stopping & self.held):
-            self.driver.step(study_id, timeout=0)  # withdraws its queued and running trials
-            self._drop(study_id)
+            self._step(study_id, 0)  # withdraws its queued and running trials
+        for study_id in sorted(self.held - active - stopping):
+            self._step(study_id, 0)  # deleted, or finished by another process
 
     def _mark_running(self) -> None:
         """Show which trials a worker has started (queued -> running) and on which worker."""
@@ -255,6 +237,10 @@ class StudyService:
                 self.store.mark_running(trial_id, worker)
 
     def _renew(self) -> None:
+        now = time.monotonic()
+        if now - self._last_renew < self.leases.renew_every_s:
+            return
+        self._last_renew = now
         for study_id in sorted(self.held):
             if not self.leases.renew(study_id):
                 logger.warning("study %s: lease lost to another service; no longer driving it", study_id)
@@ -324,15 +310,11 @@ def build_executor(settings: Settings) -> Any:
     return LocalPoolExecutor(workers=settings.workers, snapshot_root=settings.data_dir / "snapshots")
 
 
-def build_service(settings: Settings, store: SqlStore, **options: Any) -> StudyService:
+def build_driver_loop(settings: Settings, store: SqlStore, **options: Any) -> DriverLoop:
     """The service for ``demcal serve``: executor and leases chosen from the settings."""
     executor = build_executor(settings)
-    owner = owner_id()
-    if settings.redis_url:
-        leases: RedisLeases | LocalLeases = RedisLeases(executor.connection, owner, settings.lease_ttl_s)
-    else:
-        leases = LocalLeases(owner)
+    leases = DatabaseLeases(store, ttl_s=settings.lease_ttl_s)
     options.setdefault("reconcile_every_s", settings.reconcile_interval_s)
     # A replica scans for studies whose lease expired a few times per lease period.
     options.setdefault("scan_every_s", min(5.0, settings.lease_ttl_s / 3))
-    return StudyService(store, executor, leases, **options)
+    return DriverLoop(store, executor, leases, **options)

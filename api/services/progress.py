@@ -1,0 +1,49 @@
+"""A study's progress against simulations (hypervolume, best f1, best validated f1 per batch) and
+which parameters its experiment pins down, as clients read them.
+
+Both are computed by the optimiser's own functions (``optimizer/progress.py``,
+``optimizer/identifiability.py``) from the stored trials, the same way ``summary.json`` is, and
+kept as JSON per study version (``api/services/views.py``): they change once per batch, while a
+dashboard polls every few seconds. It reads only, and checks first that the caller may see the
+study (404 otherwise).
+"""
+
+from __future__ import annotations
+
+from api.auth import Principal
+from api.schemas import IdentifiabilityRead, StudyProgressRead
+from api.services.views import StudyViewCache
+from api.store import SqlStore
+from optimizer.identifiability import identifiability
+from optimizer.objectives import evaluate
+from optimizer.progress import study_progress
+from optimizer.space import ParameterSpace
+from optimizer.study import StudyDefinition
+
+
+def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal) -> bytes:
+    study = store.study_version(study_id, principal.visible_to)
+
+    def build() -> bytes:
+        record = store.load_study(study_id)
+        definition = StudyDefinition.model_validate(record.definition)
+        validation = (record.recommendation or {}).get("validation", [])
+        progress = study_progress(store.trials(study_id), definition, record.generation, validation)
+        return StudyProgressRead(study_id=study_id, **progress.as_json()).model_dump_json().encode()
+
+    return views.get_or_build("progress", study_id, (study.updated_at, study.generation), build)
+
+
+def identifiability_json(
+    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal
+) -> bytes:
+    study = store.study_version(study_id, principal.visible_to)
+
+    def build() -> bytes:
+        definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
+        evaluations = evaluate(store.trials(study_id), definition, definition.n_items())
+        space = ParameterSpace(definition.parameters)
+        result = identifiability(evaluations, space, definition.experiment.tolerance)
+        return IdentifiabilityRead(study_id=study_id, **result).model_dump_json().encode()
+
+    return views.get_or_build("identifiability", study_id, (study.updated_at, study.generation), build)

@@ -1,0 +1,142 @@
+"""Trials in the SQL store as the driver writes them: added, queued, running, requeued, recorded.
+
+``record_result`` is a conditional UPDATE (``... WHERE state not in (done, cancelled)``), so the
+database, not a read-then-write in Python, decides which of two racing results wins.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import sqlalchemy as sa
+from sqlalchemy.orm import undefer
+
+from api.errors import NotFoundError
+from api.models import StudyRow, TrialRow, utcnow
+from api.store.base import StoreBase, chunks, result_columns, trial_record
+from optimizer.protocols import TrialOutcome, TrialRecord, TrialSpec, TrialState
+
+log = logging.getLogger(__name__)
+
+
+class TrialStore(StoreBase):
+    def add_trials(self, specs: Sequence[TrialSpec]) -> None:
+        if not specs:
+            return
+        with self.session() as s:
+            ids = [spec.trial_id for spec in specs]
+            existing = set()
+            for chunk in chunks(ids, 500):
+                existing.update(s.scalars(sa.select(TrialRow.id).where(TrialRow.id.in_(chunk))))
+            now = utcnow()
+            new_rows = [
+                {
+                    "id": spec.trial_id, "study_id": spec.study_id, "individual": spec.individual,
+                    "generation": spec.generation, "replicate": spec.replicate, "seed": spec.seed,
+                    "params": dict(spec.params), "scenario": dict(spec.scenario),
+                    "engine": spec.engine, "engine_options": spec.engine_options,
+                    "timeout_s": spec.timeout_s, "state": TrialState.PENDING.value,
+                    "message": "", "attempts": 0, "pareto": False,
+                    "created_at": now, "updated_at": now,
+                }
+                for spec in specs
+                if spec.trial_id not in existing
+            ]
+            if new_rows:
+                s.execute(sa.insert(TrialRow), new_rows)
+                # The study's updated_at versions its cached views (``api/services/views.py``);
+                # new trials change the unfiltered trial count.
+                s.execute(
+                    sa.update(StudyRow)
+                    .where(StudyRow.id.in_({row["study_id"] for row in new_rows}))
+                    .values(updated_at=now)
+                )
+
+    def trials(self, study_id: str, states: Sequence[TrialState] | None = None) -> list[TrialRecord]:
+        query = (
+            sa.select(TrialRow)
+            .where(TrialRow.study_id == study_id)
+            .options(undefer(TrialRow.scenario), undefer(TrialRow.result))
+            .order_by(TrialRow.individual, TrialRow.replicate)
+        )
+        if states is not None:
+            query = query.where(TrialRow.state.in_([st.value for st in states]))
+        with self.session() as s:
+            return [trial_record(row) for row in s.scalars(query)]
+
+    def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
+        """Queued; ``message`` says why they may wait (no worker has their engine yet)."""
+        with self.session() as s:
+            for chunk in chunks(list(trial_ids), 500):
+                s.execute(
+                    sa.update(TrialRow)
+                    .where(
+                        TrialRow.id.in_(chunk),
+                        TrialRow.state.in_([TrialState.PENDING.value, TrialState.QUEUED.value]),
+                    )
+                    .values(state=TrialState.QUEUED.value, attempts=TrialRow.attempts + 1, message=message,
+                            updated_at=utcnow())
+                )
+
+    def mark_running(self, trial_id: str, worker: str | None = None) -> None:
+        with self.session() as s:
+            now = utcnow()
+            s.execute(
+                sa.update(TrialRow)
+                .where(
+                    TrialRow.id == trial_id,
+                    TrialRow.state.in_([TrialState.PENDING.value, TrialState.QUEUED.value]),
+                )
+                .values(state=TrialState.RUNNING.value, worker=worker, started_at=now, updated_at=now)
+            )
+
+    def requeue(self, trial_ids: Sequence[str]) -> None:
+        """Send trials lost in flight (queued or running, unknown to the executor) back to pending."""
+        with self.session() as s:
+            for chunk in chunks(list(trial_ids), 500):
+                s.execute(
+                    sa.update(TrialRow)
+                    .where(
+                        TrialRow.id.in_(chunk),
+                        TrialRow.state.in_([TrialState.QUEUED.value, TrialState.RUNNING.value]),
+                    )
+                    .values(state=TrialState.PENDING.value, updated_at=utcnow())
+                )
+
+    def record_result(self, outcome: TrialOutcome) -> bool:
+        result = outcome.result
+        now = utcnow()
+        values = result_columns(result) | {
+            "state": TrialState.DONE.value, "cost": result.cost, "dt": result.dt,
+            "message": result.message, "finished_at": now, "updated_at": now,
+        }
+        if outcome.worker is not None:
+            values["worker"] = outcome.worker
+        with self.session() as s:
+            recorded = s.execute(
+                sa.update(TrialRow)
+                .where(
+                    TrialRow.id == outcome.trial_id,
+                    TrialRow.state.not_in([TrialState.DONE.value, TrialState.CANCELLED.value]),
+                )
+                .values(**values)
+            ).rowcount
+        if not recorded:
+            log.info("result for trial %s not recorded: already done, cancelled or unknown", outcome.trial_id)
+        return bool(recorded)
+
+    def get_trial(self, study_id: str, trial_id: str) -> TrialRow:
+        with self.session() as s:
+            row = s.scalars(
+                sa.select(TrialRow)
+                .where(TrialRow.study_id == study_id, TrialRow.id == trial_id)
+                .options(undefer(TrialRow.result))
+            ).one_or_none()
+            if row is None:
+                raise NotFoundError(
+                    f"no trial {trial_id!r} in study {study_id!r}; list them with "
+                    f"GET /api/v1/studies/{study_id}/trials"
+                )
+            return row
+

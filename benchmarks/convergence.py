@@ -1,0 +1,62 @@
+"""Convergence of the feeder's N_t with the items' shape resolution (issue 12).
+
+Runs the paper's full protocol (``examples/feeder.toml``: 30 items, 65 s, ``stop_when_empty``)
+for every seed, parameter set and clump resolution, interleaved (seed outermost) so that a run cut
+short still has a sample in every cell, and prints one line per run plus a summary table:
+
+    NUMBA_NUM_THREADS=1 nice -n 10 python benchmarks/convergence.py \
+        [--seeds 10] [--resolutions 12 24 48] [--sets empties clogs]
+
+Parameter sets: ``empties`` (E 1e7, e 0.5, mu 0.5: the tray empties at 12 spheres) and ``clogs``
+(E 1e7, e 0.2, mu 0.9: items stay behind at 12 spheres).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from dem.scenarios.feeder import load_feeder_config, run_feeder
+
+SETS = {
+    "empties": {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.5},
+    "clogs": {"E": 1e7, "nu": 0.3, "e": 0.2, "mu": 0.9},
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default="examples/feeder.toml")
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--resolutions", type=int, nargs="+", default=[12, 24, 48])
+    parser.add_argument("--sets", nargs="+", default=list(SETS), choices=list(SETS))
+    args = parser.parse_args()
+    base = load_feeder_config(args.config)
+    results: dict[tuple[str, int], list[int]] = {}
+    for seed in range(args.seeds):
+        for name in args.sets:
+            for resolution in args.resolutions:
+                config = base.model_copy(
+                    update={"items": base.items.model_copy(update={"resolution": resolution})}
+                )
+                started = time.perf_counter()
+                r = run_feeder(config, SETS[name], seed)
+                results.setdefault((name, resolution), []).append(r.n_remaining)
+                print(
+                    f"{name} res {resolution:3d} seed {seed}: N_t = {r.n_remaining}/{r.n_items}, "
+                    f"{r.status.value}, t_end {r.sim_time:.1f} s, "
+                    f"{time.perf_counter() - started:.0f} s wall",
+                    flush=True,
+                )
+    print("| set | resolution | seeds | N_t values | mean | sd |")
+    print("|---|---|---|---|---|---|")
+    for (name, resolution), values in sorted(results.items()):
+        sd = statistics.stdev(values) if len(values) > 1 else float("nan")
+        print(
+            f"| {name} | {resolution} | {len(values)} | {values} | {statistics.mean(values):.1f} | {sd:.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,550 @@
+r"""Closest features of two convex point sets (GJK) and the centre of their contact patch.
+
+A convex shape here is the convex hull of a few vertices placed by a rotation and a translation:
+a rounded polyhedron's core (``dem/polyhedra.py``), a sphere's centre (one vertex) or a wall
+triangle. The contact of two rounded shapes (cores A and B, rounding radii r_a and r_b) is that
+of their cores:
+
+* ``gjk_distance`` gives the distance d of the cores and the closest points p_a, p_b (Gilbert,
+  Johnson & Keerthi 1988, with Ericson's closest-point-on-simplex regions, Real-Time Collision
+  Detection 9.5); the overlap is ``delta = r_a + r_b - d`` and the normal ``n = (p_a - p_b) / d``
+  points from B to A. The force of the contact law acts along n with the magnitude of *one*
+  contact of the body pair, so a face's stiffness does not depend on how many vertices it has.
+  Along a configuration path ``d`` changes at the rate ``n . (v_a(p) - v_b(p))`` (envelope
+  theorem), so that force applied at a point on the line through the closest points does the
+  work ``-dU`` of ``U = K delta^2 / 2``: the law is conservative.
+* Where the closest points are not unique (two faces parallel, an edge parallel to a face, two
+  parallel edges) any point of the set of closest points is such a point. ``contact_patch``
+  places the force at the centre of pressure of the patch where the rounded surfaces overlap
+  (depth varying linearly over it): the centroid of two parallel faces' overlap, so a box landing
+  flat feels no torque, moving continuously to the lower edge as the face tilts by the overlap
+  over its width. Only inside that band (tilts below delta / width) does the point differ from
+  the closest point: it gives a resting face its rocking stiffness, where a point jumping between
+  corners would rock for ever.
+
+Pure numba functions; the scratch array ``work`` (4, MAX_FEATURE, 3) keeps them free of
+allocation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from dem.conf import JIT_FLAGS
+
+MAX_FEATURE = 128  # most vertices of one shape on its supporting plane that the patch uses
+_MAX_ITERATIONS = 64
+_REL_EPS = 1e-12
+
+
+def scratch() -> np.ndarray:
+    """The work array ``contact_patch`` needs."""
+    return np.zeros((4, MAX_FEATURE, 3))
+
+
+@numba.njit(**JIT_FLAGS)
+def support(verts, start, count, rot, px, py, pz, dx, dy, dz):
+    """World position of the vertex of ``verts[start:start+count]`` (placed by rot, p) furthest
+    along d."""
+    bx = rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz
+    by = rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz
+    bz = rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz
+    best = -np.inf
+    k = start
+    for v in range(start, start + count):
+        s = verts[v, 0] * bx + verts[v, 1] * by + verts[v, 2] * bz
+        if s > best:
+            best = s
+            k = v
+    x, y, z = verts[k, 0], verts[k, 1], verts[k, 2]
+    return (
+        px + rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z,
+        py + rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z,
+        pz + rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z,
+    )
+
+
+@numba.njit(**JIT_FLAGS)
+def _dot(s, a, b):
+    return s[a, 0] * s[b, 0] + s[a, 1] * s[b, 1] + s[a, 2] * s[b, 2]
+
+
+@numba.njit(**JIT_FLAGS)
+def _keep(simplex, lam, idx0, idx1, idx2, k):
+    """Reduce the simplex (rows: w, a, b stacked in columns 0:3, 3:6, 6:9) to rows idx*."""
+    tmp = np.empty((3, 9))
+    sel = (idx0, idx1, idx2)
+    for r in range(k):
+        for c in range(9):
+            tmp[r, c] = simplex[sel[r], c]
+    for r in range(k):
+        for c in range(9):
+            simplex[r, c] = tmp[r, c]
+    return k
+
+
+@numba.njit(**JIT_FLAGS)
+def _closest_segment(s, lam):
+    """Closest point to the origin of segment rows 0-1; reduces the simplex; returns its size."""
+    ex, ey, ez = s[1, 0] - s[0, 0], s[1, 1] - s[0, 1], s[1, 2] - s[0, 2]
+    ee = ex * ex + ey * ey + ez * ez
+    t = -(s[0, 0] * ex + s[0, 1] * ey + s[0, 2] * ez) / ee if ee > 0.0 else 0.0
+    if t <= 0.0:
+        lam[0] = 1.0
+        return 1
+    if t >= 1.0:
+        _keep(s, lam, 1, 0, 0, 1)
+        lam[0] = 1.0
+        return 1
+    lam[0] = 1.0 - t
+    lam[1] = t
+    return 2
+
+
+@numba.njit(**JIT_FLAGS)
+def _closest_triangle(s, lam):
+    """Closest point to the origin of triangle rows 0-2 (Ericson 5.1.5 regions)."""
+    abx, aby, abz = s[1, 0] - s[0, 0], s[1, 1] - s[0, 1], s[1, 2] - s[0, 2]
+    acx, acy, acz = s[2, 0] - s[0, 0], s[2, 1] - s[0, 1], s[2, 2] - s[0, 2]
+    d1 = -(abx * s[0, 0] + aby * s[0, 1] + abz * s[0, 2])
+    d2 = -(acx * s[0, 0] + acy * s[0, 1] + acz * s[0, 2])
+    if d1 <= 0.0 and d2 <= 0.0:
+        lam[0] = 1.0
+        return 1
+    d3 = -(abx * s[1, 0] + aby * s[1, 1] + abz * s[1, 2])
+    d4 = -(acx * s[1, 0] + acy * s[1, 1] + acz * s[1, 2])
+    if d3 >= 0.0 and d4 <= d3:
+        _keep(s, lam, 1, 0, 0, 1)
+        lam[0] = 1.0
+        return 1
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        t = d1 / (d1 - d3)
+        lam[0], lam[1] = 1.0 - t, t
+        return 2
+    d5 = -(abx * s[2, 0] + aby * s[2, 1] + abz * s[2, 2])
+    d6 = -(acx * s[2, 0] + acy * s[2, 1] + acz * s[2, 2])
+    if d6 >= 0.0 and d5 <= d6:
+        _keep(s, lam, 2, 0, 0, 1)
+        lam[0] = 1.0
+        return 1
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        t = d2 / (d2 - d6)
+        _keep(s, lam, 0, 2, 0, 2)
+        lam[0], lam[1] = 1.0 - t, t
+        return 2
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        _keep(s, lam, 1, 2, 0, 2)
+        lam[0], lam[1] = 1.0 - t, t
+        return 2
+    total = va + vb + vc
+    if not total > 0.0:  # degenerate (collinear) triangle: keep its best edge
+        _keep(s, lam, 0, 1, 0, 2)
+        return _closest_segment(s, lam)
+    v = vb / total
+    w = vc / total
+    lam[0], lam[1], lam[2] = 1.0 - v - w, v, w
+    return 3
+
+
+@numba.njit(**JIT_FLAGS)
+def _closest_tetrahedron(s, lam):
+    """Closest point to the origin of tetrahedron rows 0-3; 4 (and lam unset) if it holds the origin."""
+    faces = ((0, 1, 2, 3), (0, 1, 3, 2), (0, 2, 3, 1), (1, 2, 3, 0))
+    best = np.inf
+    best_face = -1
+    best_k = 0
+    tri = np.empty((3, 9))
+    blam = np.zeros(4)
+    tlam = np.zeros(4)
+    for f in range(4):
+        a, b, c, o = faces[f]
+        abx, aby, abz = s[b, 0] - s[a, 0], s[b, 1] - s[a, 1], s[b, 2] - s[a, 2]
+        acx, acy, acz = s[c, 0] - s[a, 0], s[c, 1] - s[a, 1], s[c, 2] - s[a, 2]
+        nx, ny, nz = aby * acz - abz * acy, abz * acx - abx * acz, abx * acy - aby * acx
+        side_origin = -(nx * s[a, 0] + ny * s[a, 1] + nz * s[a, 2])
+        side_other = nx * (s[o, 0] - s[a, 0]) + ny * (s[o, 1] - s[a, 1]) + nz * (s[o, 2] - s[a, 2])
+        if side_origin * side_other >= 0.0:
+            continue  # the origin is on the inner side of this face
+        for r, idx in enumerate((a, b, c)):
+            for col in range(9):
+                tri[r, col] = s[idx, col]
+        tlam[:] = 0.0
+        k = _closest_triangle(tri, tlam)
+        px = py = pz = 0.0
+        for r in range(k):
+            px += tlam[r] * tri[r, 0]
+            py += tlam[r] * tri[r, 1]
+            pz += tlam[r] * tri[r, 2]
+        d2 = px * px + py * py + pz * pz
+        if d2 < best:
+            best = d2
+            best_face = f
+            best_k = k
+            for r in range(k):
+                blam[r] = tlam[r]
+            for r in range(3):
+                for col in range(9):
+                    s[4 + r, col] = tri[r, col]
+    if best_face < 0:
+        return 4
+    for r in range(best_k):
+        for col in range(9):
+            s[r, col] = s[4 + r, col]
+        lam[r] = blam[r]
+    return best_k
+
+
+@numba.njit(**JIT_FLAGS)
+def _flat(s):
+    """Whether simplex rows 0-3 span (almost) no volume."""
+    ax, ay, az = s[1, 0] - s[0, 0], s[1, 1] - s[0, 1], s[1, 2] - s[0, 2]
+    bx, by, bz = s[2, 0] - s[0, 0], s[2, 1] - s[0, 1], s[2, 2] - s[0, 2]
+    cx, cy, cz = s[3, 0] - s[0, 0], s[3, 1] - s[0, 1], s[3, 2] - s[0, 2]
+    volume = ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
+    scale = max(ax * ax + ay * ay + az * az, bx * bx + by * by + bz * bz, cx * cx + cy * cy + cz * cz)
+    return abs(volume) <= 1e-12 * scale**1.5
+
+
+@numba.njit(**JIT_FLAGS)
+def gjk_distance(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb):
+    """Distance of the convex hulls of two placed vertex sets and their closest points.
+
+    Returns ``(d, ax, ay, az, bx, by, bz)``; d = 0 when the hulls intersect (closest points are
+    then meaningless). ``pa``/``pb`` are 3-vectors (positions), ``rot_*`` 3x3 rotations.
+    """
+    s = np.zeros((7, 9))  # rows 0-3 the simplex, 4-6 scratch for the tetrahedron case
+    lam = np.zeros(4)
+    dx, dy, dz = pa[0] - pb[0], pa[1] - pb[1], pa[2] - pb[2]
+    if dx == 0.0 and dy == 0.0 and dz == 0.0:
+        dx = 1.0
+    ax, ay, az = support(va, sa, ca, rot_a, pa[0], pa[1], pa[2], -dx, -dy, -dz)
+    bx, by, bz = support(vb, sb, cb, rot_b, pb[0], pb[1], pb[2], dx, dy, dz)
+    s[0, 0], s[0, 1], s[0, 2] = ax - bx, ay - by, az - bz
+    s[0, 3], s[0, 4], s[0, 5] = ax, ay, az
+    s[0, 6], s[0, 7], s[0, 8] = bx, by, bz
+    lam[0] = 1.0
+    k = 1
+    vx, vy, vz = s[0, 0], s[0, 1], s[0, 2]
+    for _ in range(_MAX_ITERATIONS):
+        vv = vx * vx + vy * vy + vz * vz
+        if vv == 0.0:
+            return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        ax, ay, az = support(va, sa, ca, rot_a, pa[0], pa[1], pa[2], -vx, -vy, -vz)
+        bx, by, bz = support(vb, sb, cb, rot_b, pb[0], pb[1], pb[2], vx, vy, vz)
+        wx, wy, wz = ax - bx, ay - by, az - bz
+        if vv - (vx * wx + vy * wy + vz * wz) <= _REL_EPS * vv:
+            break
+        duplicate = False
+        for r in range(k):
+            if s[r, 0] == wx and s[r, 1] == wy and s[r, 2] == wz:
+                duplicate = True
+        if duplicate:
+            break
+        s[k, 0], s[k, 1], s[k, 2] = wx, wy, wz
+        s[k, 3], s[k, 4], s[k, 5] = ax, ay, az
+        s[k, 6], s[k, 7], s[k, 8] = bx, by, bz
+        k += 1
+        if k == 4 and _flat(s):
+            k = 3  # w lies in the triangle's plane: no progress is possible
+            break
+        lam[:] = 0.0
+        if k == 2:
+            k = _closest_segment(s, lam)
+        elif k == 3:
+            k = _closest_triangle(s, lam)
+        else:
+            k = _closest_tetrahedron(s, lam)
+            if k == 4:
+                return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        nvx = nvy = nvz = 0.0
+        for r in range(k):
+            nvx += lam[r] * s[r, 0]
+            nvy += lam[r] * s[r, 1]
+            nvz += lam[r] * s[r, 2]
+        if nvx * nvx + nvy * nvy + nvz * nvz >= vv:
+            break  # no progress: rounding; v is as good as it gets
+        vx, vy, vz = nvx, nvy, nvz
+    ax = ay = az = bx = by = bz = 0.0
+    for r in range(k):
+        ax += lam[r] * s[r, 3]
+        ay += lam[r] * s[r, 4]
+        az += lam[r] * s[r, 5]
+        bx += lam[r] * s[r, 6]
+        by += lam[r] * s[r, 7]
+        bz += lam[r] * s[r, 8]
+    d = math.sqrt((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2)
+    return d, ax, ay, az, bx, by, bz
+
+
+@numba.njit(**JIT_FLAGS)
+def _feature(verts, start, count, rot, p, nx, ny, nz, ux, uy, uz, wx, wy, wz, sign, tol, out):
+    """Vertices of a shape within tol of its supporting plane in direction sign*n: their
+    projections on (u, w) and their depth ``tol - height above the plane``; returns how many (at
+    most MAX_FEATURE)."""
+    best = -np.inf
+    for v in range(start, start + count):
+        x = p[0] + rot[0, 0] * verts[v, 0] + rot[0, 1] * verts[v, 1] + rot[0, 2] * verts[v, 2]
+        y = p[1] + rot[1, 0] * verts[v, 0] + rot[1, 1] * verts[v, 1] + rot[1, 2] * verts[v, 2]
+        z = p[2] + rot[2, 0] * verts[v, 0] + rot[2, 1] * verts[v, 1] + rot[2, 2] * verts[v, 2]
+        best = max(best, sign * (x * nx + y * ny + z * nz))
+    m = 0
+    for v in range(start, start + count):
+        x = p[0] + rot[0, 0] * verts[v, 0] + rot[0, 1] * verts[v, 1] + rot[0, 2] * verts[v, 2]
+        y = p[1] + rot[1, 0] * verts[v, 0] + rot[1, 1] * verts[v, 1] + rot[1, 2] * verts[v, 2]
+        z = p[2] + rot[2, 0] * verts[v, 0] + rot[2, 1] * verts[v, 1] + rot[2, 2] * verts[v, 2]
+        depth = tol - (best - sign * (x * nx + y * ny + z * nz))
+        if depth >= 0.0 and m < out.shape[0]:
+            out[m, 0] = x * ux + y * uy + z * uz
+            out[m, 1] = x * wx + y * wy + z * wz
+            out[m, 2] = depth
+            m += 1
+    return m
+
+
+@numba.njit(**JIT_FLAGS)
+def _cross2(o, a, b):
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+@numba.njit(**JIT_FLAGS)
+def _copy_row(dst, i, src, j):
+    dst[i, 0], dst[i, 1], dst[i, 2] = src[j, 0], src[j, 1], src[j, 2]
+
+
+@numba.njit(**JIT_FLAGS)
+def _hull2(pts, m, out, eps):
+    """Counter-clockwise convex hull of pts[:m] (Andrew's monotone chain; column 2 rides along)
+    into out; returns its size. Points closer than eps collapse; collinear points are dropped,
+    so a segment has 2 points."""
+    for a in range(1, m):  # insertion sort by (x, y): features are small
+        x, y, h = pts[a, 0], pts[a, 1], pts[a, 2]
+        b = a - 1
+        while b >= 0 and (pts[b, 0] > x or (pts[b, 0] == x and pts[b, 1] > y)):
+            _copy_row(pts, b + 1, pts, b)
+            b -= 1
+        pts[b + 1, 0], pts[b + 1, 1], pts[b + 1, 2] = x, y, h
+    h = 0
+    for a in range(m):
+        while h >= 2 and _cross2(out[h - 2], out[h - 1], pts[a]) <= eps * eps:
+            h -= 1
+        _copy_row(out, h, pts, a)
+        h += 1
+    lower = h + 1
+    for a in range(m - 2, -1, -1):
+        while h >= lower and _cross2(out[h - 2], out[h - 1], pts[a]) <= eps * eps:
+            h -= 1
+        _copy_row(out, h, pts, a)
+        h += 1
+    h = max(h - 1, 1)
+    if h == 2 and (out[0, 0] - out[1, 0]) ** 2 + (out[0, 1] - out[1, 1]) ** 2 <= eps * eps:
+        h = 1
+    return h
+
+
+@numba.njit(**JIT_FLAGS)
+def _clip(poly, m, clip, c, out):
+    """Sutherland-Hodgman: poly[:m] (convex, ccw, or a segment/point) clipped by the ccw convex
+    polygon clip[:c], poly's depth (column 2) interpolated; result in poly (out is scratch);
+    returns its size."""
+    for e in range(c):
+        ex0, ey0 = clip[e, 0], clip[e, 1]
+        ex1, ey1 = clip[(e + 1) % c, 0], clip[(e + 1) % c, 1]
+        n = 0
+        if m == 1:
+            side = (ex1 - ex0) * (poly[0, 1] - ey0) - (ey1 - ey0) * (poly[0, 0] - ex0)
+            if side >= 0.0:
+                _copy_row(out, 0, poly, 0)
+                n = 1
+        else:
+            edges = m if m > 2 else 1
+            for a in range(edges):
+                q = (a + 1) % m
+                px, py = poly[a, 0], poly[a, 1]
+                qx, qy = poly[q, 0], poly[q, 1]
+                sp = (ex1 - ex0) * (py - ey0) - (ey1 - ey0) * (px - ex0)
+                sq = (ex1 - ex0) * (qy - ey0) - (ey1 - ey0) * (qx - ex0)
+                if sp >= 0.0:
+                    _copy_row(out, n, poly, a)
+                    n += 1
+                if (sp >= 0.0) != (sq >= 0.0):
+                    t = sp / (sp - sq)
+                    out[n, 0], out[n, 1] = px + t * (qx - px), py + t * (qy - py)
+                    out[n, 2] = poly[a, 2] + t * (poly[q, 2] - poly[a, 2])
+                    n += 1
+                if m == 2 and sq >= 0.0:
+                    _copy_row(out, n, poly, q)
+                    n += 1
+        for a in range(n):
+            _copy_row(poly, a, out, a)
+        m = n
+        if m == 0:
+            return 0
+    return m
+
+
+@numba.njit(**JIT_FLAGS)
+def _segment_load(x0, y0, p0, x1, y1, p1):
+    """(load, cx, cy) of a segment under a linear line load p (uniform if p vanishes)."""
+    length = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
+    if p0 + p1 <= 0.0:
+        p0 = p1 = 1.0
+    load = 0.5 * length * (p0 + p1)
+    k = 1.0 / (3.0 * (p0 + p1))
+    return load, (x0 * (2 * p0 + p1) + x1 * (p0 + 2 * p1)) * k, (y0 * (2 * p0 + p1) + y1 * (p0 + 2 * p1)) * k
+
+
+@numba.njit(**JIT_FLAGS)
+def _pressure_centre(poly, m):
+    """(area load, line load, cx, cy, suu, suw, sww) of polygon poly[:m] under the pressure that
+    varies linearly between its vertices' depths (column 2): the loads and the centre of pressure
+    exactly (fan of triangles, Gauss's formula for a linear density), and the patch's second
+    moments of area about that centre per unit area (s_uu = <u^2>, ...). A degenerate polygon is a
+    segment under a line load; a point has no load and no moments."""
+    if m >= 3:
+        total = mx = my = 0.0
+        plain = pmx = pmy = 0.0
+        s_uu = s_uw = s_ww = 0.0
+        for a in range(1, m - 1):
+            b = a + 1
+            area = 0.5 * _cross2(poly[0], poly[a], poly[b])
+            if area <= 0.0:
+                continue
+            ps = poly[0, 2] + poly[a, 2] + poly[b, 2]
+            xs = poly[0, 0] + poly[a, 0] + poly[b, 0]
+            ys = poly[0, 1] + poly[a, 1] + poly[b, 1]
+            px = poly[0, 2] * poly[0, 0] + poly[a, 2] * poly[a, 0] + poly[b, 2] * poly[b, 0]
+            py = poly[0, 2] * poly[0, 1] + poly[a, 2] * poly[a, 1] + poly[b, 2] * poly[b, 1]
+            total += area * ps / 3.0
+            mx += area / 12.0 * (ps * xs + px)
+            my += area / 12.0 * (ps * ys + py)
+            plain += area
+            pmx += area * xs / 3.0
+            pmy += area * ys / 3.0
+            # int x x^T dA over the triangle: A/12 (sum_k x_k x_k^T + xs xs^T)
+            qxx = poly[0, 0] ** 2 + poly[a, 0] ** 2 + poly[b, 0] ** 2
+            qyy = poly[0, 1] ** 2 + poly[a, 1] ** 2 + poly[b, 1] ** 2
+            qxy = poly[0, 0] * poly[0, 1] + poly[a, 0] * poly[a, 1] + poly[b, 0] * poly[b, 1]
+            s_uu += area / 12.0 * (qxx + xs * xs)
+            s_ww += area / 12.0 * (qyy + ys * ys)
+            s_uw += area / 12.0 * (qxy + xs * ys)
+        if plain > 0.0:
+            if total > 0.0:
+                cx, cy = mx / total, my / total
+            else:  # no depth anywhere: the area centroid
+                cx, cy, total = pmx / plain, pmy / plain, plain
+            s_uu = s_uu / plain - 2.0 * cx * pmx / plain + cx * cx
+            s_ww = s_ww / plain - 2.0 * cy * pmy / plain + cy * cy
+            s_uw = s_uw / plain - cx * pmy / plain - cy * pmx / plain + cx * cy
+            return total, 0.0, cx, cy, s_uu, s_uw, s_ww
+    if m == 1:
+        return 0.0, 0.0, poly[0, 0], poly[0, 1], 0.0, 0.0, 0.0
+    lo = hi = 0
+    for a in range(1, m):
+        if poly[a, 0] < poly[lo, 0] or (poly[a, 0] == poly[lo, 0] and poly[a, 1] < poly[lo, 1]):
+            lo = a
+        if poly[a, 0] > poly[hi, 0] or (poly[a, 0] == poly[hi, 0] and poly[a, 1] > poly[hi, 1]):
+            hi = a
+    x0, y0, x1, y1 = poly[lo, 0], poly[lo, 1], poly[hi, 0], poly[hi, 1]
+    load, cx, cy = _segment_load(x0, y0, poly[lo, 2], x1, y1, poly[hi, 2])
+    # <(x - c)(x - c)^T> along the segment (uniform): from <x x^T> = (x0 x0 + x0 x1 + x1 x1) / 3
+    s_uu = (x0 * x0 + x0 * x1 + x1 * x1) / 3.0 - cx * (x0 + x1) + cx * cx
+    s_ww = (y0 * y0 + y0 * y1 + y1 * y1) / 3.0 - cy * (y0 + y1) + cy * cy
+    s_uw = (
+        (2 * x0 * y0 + x0 * y1 + x1 * y0 + 2 * x1 * y1) / 6.0
+        - 0.5 * (cx * (y0 + y1) + cy * (x0 + x1))
+        + cx * cy
+    )
+    return 0.0, load, cx, cy, s_uu, s_uw, s_ww
+
+
+@numba.njit(**JIT_FLAGS)
+def plane_basis(nx, ny, nz):
+    """Unit vectors u, w with (u, w, n) right-handed: the patch's coordinates."""
+    if abs(nx) < 0.9:
+        ux, uy, uz = 0.0, nz, -ny
+    else:
+        ux, uy, uz = -nz, 0.0, nx
+    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux / norm, uy / norm, uz / norm
+    return ux, uy, uz, ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux
+
+
+@numba.njit(**JIT_FLAGS)
+def contact_patch(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, ax, ay, az, bx, by, bz, tol, work):
+    """Centre of the contact patch of two separated convex shapes whose closest points (from
+    ``gjk_distance``) are a and b, for the overlap ``tol`` of their rounded surfaces: returns
+    ``(area_load, line_load, cx, cy, cz, s_uu, s_uw, s_ww)`` with c on the plane midway between
+    the cores and s the patch's second moments about c per unit area in ``plane_basis(n)``.
+
+    The patch is where the rounded surfaces overlap: the vertices of each shape less than tol
+    above its supporting plane, clipped against the other's in projection. The pressure at a
+    vertex is its depth (tol minus its height), linear in between (a Winkler foundation), and c
+    is the centre of that pressure: the centroid when two faces are parallel, moving continuously
+    to the lower edge as a face tilts by tol over its width, the closest point once one vertex or
+    edge alone is within tol. The loads weight patches of several coplanar triangles."""
+    nx, ny, nz = ax - bx, ay - by, az - bz
+    d = math.sqrt(nx * nx + ny * ny + nz * nz)
+    mx, my, mz = 0.5 * (ax + bx), 0.5 * (ay + by), 0.5 * (az + bz)
+    if d == 0.0:
+        return 0.0, 0.0, mx, my, mz, 0.0, 0.0, 0.0
+    nx, ny, nz = nx / d, ny / d, nz / d
+    ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
+    na = _feature(va, sa, ca, rot_a, pa, nx, ny, nz, ux, uy, uz, wx, wy, wz, -1.0, tol, work[0])
+    nb = _feature(vb, sb, cb, rot_b, pb, nx, ny, nz, ux, uy, uz, wx, wy, wz, 1.0, tol, work[1])
+    eps = 1e-9 * d + 1e-12 * (tol + 1.0)
+    ha = _hull2(work[0], na, work[2], eps)
+    for a in range(ha):
+        _copy_row(work[0], a, work[2], a)
+    hb = _hull2(work[1], nb, work[2], eps)
+    for a in range(hb):
+        _copy_row(work[1], a, work[2], a)
+    # Clip the lower-dimensional feature by the other (a polygon clips anything).
+    if hb >= 3:
+        m = _clip(work[0], ha, work[1], hb, work[3])
+        poly = work[0]
+    elif ha >= 3:
+        m = _clip(work[1], hb, work[0], ha, work[3])
+        poly = work[1]
+    else:
+        m = 0
+        poly = work[0]
+        if ha == 2 and hb == 2:
+            m = _parallel_segments(work[0], work[1], eps)
+    if m == 0:  # crossing edges, or features apart in projection: the closest points
+        return 0.0, 0.0, mx, my, mz, 0.0, 0.0, 0.0
+    area_load, line_load, cu, cw, s_uu, s_uw, s_ww = _pressure_centre(poly, m)
+    h = mx * nx + my * ny + mz * nz
+    cx, cy, cz = h * nx + cu * ux + cw * wx, h * ny + cu * uy + cw * wy, h * nz + cu * uz + cw * wz
+    return area_load, line_load, cx, cy, cz, s_uu, s_uw, s_ww
+
+
+@numba.njit(**JIT_FLAGS)
+def _parallel_segments(s, t, tol):
+    """Overlap of two projected segments if they are collinear (parallel edges): written to s,
+    returns 2; else 0 (crossing edges have a unique closest point)."""
+    ex, ey = s[1, 0] - s[0, 0], s[1, 1] - s[0, 1]
+    length = math.sqrt(ex * ex + ey * ey)
+    if length == 0.0:
+        return 0
+    ex, ey = ex / length, ey / length
+    for k in range(2):
+        if abs(ex * (t[k, 1] - s[0, 1]) - ey * (t[k, 0] - s[0, 0])) > tol:
+            return 0
+    lo, hi = 0.0, length
+    t0 = ex * (t[0, 0] - s[0, 0]) + ey * (t[0, 1] - s[0, 1])
+    t1 = ex * (t[1, 0] - s[0, 0]) + ey * (t[1, 1] - s[0, 1])
+    lo = max(lo, min(t0, t1))
+    hi = min(hi, max(t0, t1))
+    if hi < lo:
+        return 0
+    x0, y0, p0, p1 = s[0, 0], s[0, 1], s[0, 2], s[1, 2]
+    s[0, 0], s[0, 1], s[0, 2] = x0 + lo * ex, y0 + lo * ey, p0 + (p1 - p0) * lo / length
+    s[1, 0], s[1, 1], s[1, 2] = x0 + hi * ex, y0 + hi * ey, p0 + (p1 - p0) * hi / length
+    return 2

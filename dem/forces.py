@@ -1,0 +1,455 @@
+"""Contact forces and torques on the bodies from the neighbour lists, plus gravity.
+
+For every listed pair the geometry (overlap, normal, contact point) is computed here and the
+force comes from ``dem.contact.sphere_contact_force``; this module applies the law's rules that
+involve more than one sphere contact:
+
+* the resolution rule: a body pair's (or a body's and a facet's) stiffness is shared among its
+  simultaneous sphere contacts with weights ``share_weight(delta) / sum`` (``dem/contact.py``);
+* the facet rule of ``dem/walls.py``: an edge or vertex contact is dropped when its contact
+  point also lies on another touched facet of the same wall that is at least as close.
+
+A row that is a rounded-polyhedron piece (``core_count > 0``) gets its overlap, normal, contact
+point and patch from ``dem/rounded_contact.py`` instead of the sphere formulas (a plain sphere
+meeting a piece is a one-vertex core), and its face contacts the patch's dampers
+(``dem.contact.patch_damping``); the rest of the law is shared.
+
+The contact-law constants of a body pair (K, C, K_t, C_t: two square roots) change only when
+the lists are rebuilt, so ``body_pair_laws`` computes them once per build into the list's
+``group_law``; against a wall they are computed once per body and wall in each step. A
+sphere-facet pair whose distance from the facet's plane exceeds the sphere's radius is dismissed
+before the closest-point test on each of its triangles.
+
+Materials (``dem/materials.py``): every body and wall has a material index into the
+simulation's table ``material`` (``MaterialArrays``): K from both moduli in series, damping ratio,
+friction and K_t / K_n from the pair's row.
+
+Kernels only, no allocation; a blow-up is reported as the offending body, never raised.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from dem.conf import JIT_FLAGS
+from dem.contact import patch_damping, share_weight, sphere_contact_force
+from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
+from dem.materials import L_KT, L_MU, L_ZETA
+from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_GROUPS, N_PAIRS
+from dem.rounded_contact import facet_geometry, pair_geometry
+
+
+@numba.njit(**JIT_FLAGS)
+def body_pair_laws(pairs, sbody, bodies, material):
+    """Each body pair's contact-law constants (``G_*`` columns of ``pairs.group_law``) for the
+    pairs just built: K = series(E_a D_a, E_b D_b), C = 2 zeta sqrt(K m*), zeta, mu and K_t / K_n
+    of the pair of materials (``dem/contact.py``, ``dem/materials.py``)."""
+    pp_i, pp_j, pp_group, grp_law = pairs.i, pairs.j, pairs.group, pairs.group_law
+    diameter, mass, body_mat = bodies.diameter, bodies.mass, bodies.material
+    for p in range(pairs.count[N_PAIRS]):
+        if p > 0 and pp_group[p] == pp_group[p - 1]:
+            continue
+        ba, bb = sbody[pp_i[p]], sbody[pp_j[p]]
+        ma, mb = body_mat[ba], body_mat[bb]
+        e_a, e_b = material.E[ma], material.E[mb]
+        if e_a == e_b:  # E D_a D_b / (D_a + D_b), the paper's form, to the last bit
+            k_n = e_a * diameter[ba] * diameter[bb] / (diameter[ba] + diameter[bb])
+        else:
+            k_a, k_b = e_a * diameter[ba], e_b * diameter[bb]
+            k_n = k_a * k_b / (k_a + k_b)
+        m_eff = mass[ba] * mass[bb] / (mass[ba] + mass[bb])
+        zeta = material.law[ma, mb, L_ZETA]
+        k_t = material.law[ma, mb, L_KT] * k_n
+        g = pp_group[p]
+        grp_law[g, G_KN] = k_n
+        grp_law[g, G_CN] = 2.0 * zeta * math.sqrt(k_n * m_eff)
+        grp_law[g, G_KT] = k_t
+        grp_law[g, G_CT] = 2.0 * zeta * math.sqrt(k_t * m_eff)
+        grp_law[g, G_MU] = material.law[ma, mb, L_MU]
+
+
+@numba.njit(**JIT_FLAGS)
+def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_limit, hist_dt):
+    """Gravity plus all contact forces and torques.
+
+    Returns (sphere contacts carrying force, for the cost; the body whose overlap exceeds
+    ``overlap_limit`` of a sphere radius, or -1). ``hist_dt`` advances the tangential springs
+    (0 re-evaluates forces without advancing them).
+    """
+    force, torque, mass = bodies.force, bodies.torque, bodies.mass
+    for b in range(mass.shape[0]):
+        for k in range(3):
+            force[b, k] = mass[b] * gravity[k]
+            torque[b, k] = 0.0
+    n_pairs, bad = _sphere_pair_forces(bodies, spheres, lists.pairs, overlap_limit, hist_dt)
+    if bad >= 0:
+        return n_pairs, bad
+    n_walls, bad = _wall_forces(bodies, spheres, material, walls, lists.wall_pairs, overlap_limit, hist_dt)
+    return n_pairs + n_walls, bad
+
+
+@numba.njit(**JIT_FLAGS)
+def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
+    """Sphere-sphere contacts: geometry and the overlap sum of each body pair, then forces.
+    Returns (contacts carrying force, offending body or -1)."""
+    x, radius, sbody = spheres.x, spheres.radius, spheres.body
+    rounding, core_count = spheres.rounding, spheres.core_count
+    active, pos, vel, omega, force, torque = (
+        bodies.active,
+        bodies.pos,
+        bodies.vel,
+        bodies.omega,
+        bodies.force,
+        bodies.torque,
+    )
+    pp_i, pp_j, pp_hist, pp_group = pairs.i, pairs.j, pairs.hist, pairs.group
+    pp_delta, pp_n, grp_sum, grp_law = pairs.delta, pairs.normal, pairs.group_sum, pairs.group_law
+    n_contacts = 0
+    n_pp = pairs.count[N_PAIRS]
+    for g in range(pairs.count[N_GROUPS]):
+        grp_sum[g] = 0.0
+    for p in range(n_pp):
+        i, j = pp_i[p], pp_j[p]
+        pp_delta[p] = -1.0
+        if not (active[sbody[i]] and active[sbody[j]]):
+            continue
+        dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        rs = radius[i] + radius[j]
+        if d2 >= rs * rs:
+            pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
+            continue
+        if core_count[i] > 0 or core_count[j] > 0:
+            delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww = _rounded_pair(
+                i, j, bodies, spheres, pairs.axis[p]
+            )
+            if delta <= 0.0:
+                pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
+                continue
+            if dist == 0.0 or delta > lim * min(rounding[i], rounding[j]):
+                return n_contacts, sbody[i]
+            pp_delta[p] = delta
+            pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = nx, ny, nz
+            # The middle of the overlap along n (as for spheres): the mid-plane point moved by
+            # (r_b - r_a) / 2.
+            shift = 0.5 * (rounding[j] - rounding[i])
+            pairs.point[p, 0] = cx + shift * nx
+            pairs.point[p, 1] = cy + shift * ny
+            pairs.point[p, 2] = cz + shift * nz
+            pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2] = s_uu, s_uw, s_ww
+            grp_sum[pp_group[p]] += share_weight(delta)
+            continue
+        d = math.sqrt(d2)
+        delta = rs - d
+        if delta > lim * min(radius[i], radius[j]) or d == 0.0:
+            return n_contacts, sbody[i]
+        pp_delta[p] = delta
+        pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = dx / d, dy / d, dz / d
+        grp_sum[pp_group[p]] += share_weight(delta)
+    for p in range(n_pp):
+        delta = pp_delta[p]
+        if delta <= 0.0:
+            continue
+        i, j = pp_i[p], pp_j[p]
+        ba, bb = sbody[i], sbody[j]
+        nx, ny, nz = pp_n[p, 0], pp_n[p, 1], pp_n[p, 2]
+        rounded = core_count[i] > 0 or core_count[j] > 0
+        if rounded:
+            cx, cy, cz = pairs.point[p, 0], pairs.point[p, 1], pairs.point[p, 2]
+        else:
+            reach = radius[j] - 0.5 * delta
+            cx, cy, cz = x[j, 0] + nx * reach, x[j, 1] + ny * reach, x[j, 2] + nz * reach
+        rax, ray, raz = cx - pos[ba, 0], cy - pos[ba, 1], cz - pos[ba, 2]
+        rbx, rby, rbz = cx - pos[bb, 0], cy - pos[bb, 1], cz - pos[bb, 2]
+        vx = (vel[ba, 0] + omega[ba, 1] * raz - omega[ba, 2] * ray) - (
+            vel[bb, 0] + omega[bb, 1] * rbz - omega[bb, 2] * rby
+        )
+        vy = (vel[ba, 1] + omega[ba, 2] * rax - omega[ba, 0] * raz) - (
+            vel[bb, 1] + omega[bb, 2] * rbx - omega[bb, 0] * rbz
+        )
+        vz = (vel[ba, 2] + omega[ba, 0] * ray - omega[ba, 1] * rax) - (
+            vel[bb, 2] + omega[bb, 0] * rby - omega[bb, 1] * rbx
+        )
+        g = pp_group[p]
+        weight = share_weight(delta) / grp_sum[g]
+        mu = grp_law[g, G_MU]
+        fx, fy, fz, f_n = sphere_contact_force(
+            nx,
+            ny,
+            nz,
+            delta,
+            vx,
+            vy,
+            vz,
+            weight,
+            grp_law[g, G_KN],
+            grp_law[g, G_CN],
+            grp_law[g, G_KT],
+            grp_law[g, G_CT],
+            mu,
+            pp_hist,
+            p,
+            hist_dt,
+        )
+        force[ba, 0] += fx
+        force[ba, 1] += fy
+        force[ba, 2] += fz
+        force[bb, 0] -= fx
+        force[bb, 1] -= fy
+        force[bb, 2] -= fz
+        torque[ba, 0] += ray * fz - raz * fy
+        torque[ba, 1] += raz * fx - rax * fz
+        torque[ba, 2] += rax * fy - ray * fx
+        torque[bb, 0] -= rby * fz - rbz * fy
+        torque[bb, 1] -= rbz * fx - rbx * fz
+        torque[bb, 2] -= rbx * fy - rby * fx
+        if rounded:
+            tx, ty, tz = patch_damping(
+                nx,
+                ny,
+                nz,
+                pairs.moment[p, 0],
+                pairs.moment[p, 1],
+                pairs.moment[p, 2],
+                omega[ba, 0] - omega[bb, 0],
+                omega[ba, 1] - omega[bb, 1],
+                omega[ba, 2] - omega[bb, 2],
+                weight * grp_law[g, G_CN],
+                weight * grp_law[g, G_CT],
+                mu * f_n,
+            )
+            torque[ba, 0] += tx
+            torque[ba, 1] += ty
+            torque[ba, 2] += tz
+            torque[bb, 0] -= tx
+            torque[bb, 1] -= ty
+            torque[bb, 2] -= tz
+        n_contacts += 1
+    return n_contacts, -1
+
+
+@numba.njit(**JIT_FLAGS)
+def _rounded_pair(i, j, bodies, spheres, axis):
+    """Contact of sphere rows i and j when one of them is a rounded-polyhedron piece (a plain
+    sphere is a one-vertex core at its centre): ``dem.rounded_contact.pair_geometry``."""
+    ba, bb = spheres.body[i], spheres.body[j]
+    core, start, count = spheres.core, spheres.core_start, spheres.core_count
+    if count[i] > 0:
+        va, sa, ca, rot_a, pa = core, start[i], count[i], bodies.rot[ba], bodies.pos[ba]
+    else:
+        va, sa, ca, rot_a, pa = spheres.x, i, 1, spheres.eye, spheres.zero
+    if count[j] > 0:
+        vb, sb, cb, rot_b, pb = core, start[j], count[j], bodies.rot[bb], bodies.pos[bb]
+    else:
+        vb, sb, cb, rot_b, pb = spheres.x, j, 1, spheres.eye, spheres.zero
+    ra, rb = spheres.rounding[i], spheres.rounding[j]
+    return pair_geometry(va, sa, ca, rot_a, pa, ra, vb, sb, cb, rot_b, pb, rb, axis, spheres.work)
+
+
+@numba.njit(**JIT_FLAGS)
+def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
+    """Sphere-facet contacts: geometry, then the edge/vertex rule, then per body the overlap sum
+    of each facet, then forces with the law of the body's and the wall's materials. Returns
+    (contacts carrying force, offending body or -1)."""
+    x, radius, sbody = spheres.x, spheres.radius, spheres.body
+    active, mass, diameter = bodies.active, bodies.mass, bodies.diameter
+    pos, vel, omega, force, torque = bodies.pos, bodies.vel, bodies.omega, bodies.force, bodies.torque
+    facets, wall_disp, wall_vel, wall_mat, facet_sum = (
+        walls.facets,
+        walls.disp,
+        walls.vel,
+        walls.material,
+        walls.facet_sum,
+    )
+    f_wall = facets.wall
+    wp_i, wp_f, wp_hist = wall_pairs.i, wall_pairs.f, wall_pairs.hist
+    wp_delta, wp_n, wp_cp, wp_keep = wall_pairs.delta, wall_pairs.normal, wall_pairs.point, wall_pairs.keep
+    n_contacts = 0
+    n_wp = wall_pairs.count[N_PAIRS]
+    tri_flat = facets.tri.reshape((-1, 3))
+    for p in range(n_wp):
+        i, f = wp_i[p], wp_f[p]
+        wp_delta[p] = -1.0
+        wp_keep[p] = False
+        if not active[sbody[i]]:
+            continue
+        w = f_wall[f]
+        r2 = radius[i] * radius[i]
+        s = plane_distance(
+            x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
+        )
+        if s * s >= r2 * PLANE_SLACK:
+            continue
+        if spheres.core_count[i] > 0:
+            b = sbody[i]
+            delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face = facet_geometry(
+                spheres.core,
+                spheres.core_start[i],
+                spheres.core_count[i],
+                bodies.rot[b],
+                pos[b],
+                spheres.rounding[i],
+                tri_flat,
+                facets.tri_start[f],
+                facets.tri_count[f],
+                wall_disp[w],
+                facets.normal[f],
+                facets.offset[f],
+                spheres.eye,
+                spheres.work,
+            )
+            if delta <= 0.0:
+                continue
+            if dist == 0.0 or delta > lim * spheres.rounding[i]:
+                return n_contacts, b
+            wp_delta[p] = delta
+            wp_n[p, 0], wp_n[p, 1], wp_n[p, 2] = nx, ny, nz
+            # The patch centre on the facet (the mid-plane point moved back by d / 2).
+            wp_cp[p, 0] = cx - 0.5 * dist * nx
+            wp_cp[p, 1] = cy - 0.5 * dist * ny
+            wp_cp[p, 2] = cz - 0.5 * dist * nz
+            wall_pairs.moment[p, 0], wall_pairs.moment[p, 1], wall_pairs.moment[p, 2] = s_uu, s_uw, s_ww
+            wp_keep[p] = is_face
+            continue
+        d2, cx, cy, cz, is_face = closest_point_on_facet(
+            x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
+        )
+        if d2 >= r2:
+            continue
+        d = math.sqrt(d2)
+        delta = radius[i] - d
+        if delta > lim * radius[i] or d == 0.0:
+            return n_contacts, sbody[i]
+        wp_delta[p] = delta
+        wp_n[p, 0], wp_n[p, 1], wp_n[p, 2] = (x[i, 0] - cx) / d, (x[i, 1] - cy) / d, (x[i, 2] - cz) / d
+        wp_cp[p, 0], wp_cp[p, 1], wp_cp[p, 2] = cx, cy, cz
+        wp_keep[p] = is_face  # face contacts always count; edge/vertex ones are checked next
+    # Edge/vertex contacts (keep False, delta > 0): keep unless their point lies on another
+    # touched facet of the same wall that is at least as close (see dem/walls.py).
+    p = 0
+    while p < n_wp:
+        q_end = p
+        while q_end < n_wp and wp_i[q_end] == wp_i[p]:
+            q_end += 1
+        i = wp_i[p]
+        tol = 1e-9 + 1e-6 * radius[i]
+        for a in range(p, q_end):
+            if wp_delta[a] <= 0.0 or wp_keep[a]:
+                continue
+            dup = False
+            for c in range(p, q_end):
+                if c == a or wp_delta[c] <= 0.0 or f_wall[wp_f[c]] != f_wall[wp_f[a]]:
+                    continue
+                closer = wp_delta[c] > wp_delta[a] + tol
+                tie = abs(wp_delta[c] - wp_delta[a]) <= tol and (wp_keep[c] or c < a)
+                if not (closer or tie):
+                    continue
+                fc = wp_f[c]
+                w = f_wall[fc]
+                e2, _, _, _, _ = closest_point_on_facet(
+                    wp_cp[a, 0],
+                    wp_cp[a, 1],
+                    wp_cp[a, 2],
+                    facets,
+                    fc,
+                    wall_disp[w, 0],
+                    wall_disp[w, 1],
+                    wall_disp[w, 2],
+                )
+                if e2 <= tol * tol:
+                    dup = True
+                    break
+            if dup:
+                wp_delta[a] = -1.0
+        for a in range(p, q_end):
+            wp_keep[a] = wp_delta[a] > 0.0
+            if not wp_keep[a]:
+                wp_hist[a, 0] = wp_hist[a, 1] = wp_hist[a, 2] = 0.0
+        p = q_end
+
+    p = 0
+    while p < n_wp:
+        b = sbody[wp_i[p]]
+        q_end = p
+        while q_end < n_wp and sbody[wp_i[q_end]] == b:
+            q_end += 1
+        for a in range(p, q_end):
+            facet_sum[wp_f[a]] = 0.0
+        for a in range(p, q_end):
+            if wp_keep[a]:
+                facet_sum[wp_f[a]] += share_weight(wp_delta[a])
+        # The law's constants depend on the body and the wall only: computed once per run of
+        # contacts with the same wall.
+        law_wall = -1
+        k_n = k_t = c_n = c_t = mu_w = 0.0
+        for a in range(p, q_end):
+            if not wp_keep[a]:
+                continue
+            f = wp_f[a]
+            w = f_wall[f]
+            if w != law_wall:
+                mb, mw = bodies.material[b], wall_mat[w]
+                e_b, e_w = material.E[mb], material.E[mw]
+                k_n = diameter[b] * e_b * e_w / (e_b + e_w)
+                k_t = material.law[mb, mw, L_KT] * k_n
+                c_n = 2.0 * material.law[mb, mw, L_ZETA] * math.sqrt(k_n * mass[b])
+                c_t = 2.0 * material.law[mb, mw, L_ZETA] * math.sqrt(k_t * mass[b])
+                mu_w = material.law[mb, mw, L_MU]
+                law_wall = w
+            delta = wp_delta[a]
+            nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
+            cx = wp_cp[a, 0] - 0.5 * delta * nx
+            cy = wp_cp[a, 1] - 0.5 * delta * ny
+            cz = wp_cp[a, 2] - 0.5 * delta * nz
+            rax, ray, raz = cx - pos[b, 0], cy - pos[b, 1], cz - pos[b, 2]
+            vx = vel[b, 0] + omega[b, 1] * raz - omega[b, 2] * ray - wall_vel[w, 0]
+            vy = vel[b, 1] + omega[b, 2] * rax - omega[b, 0] * raz - wall_vel[w, 1]
+            vz = vel[b, 2] + omega[b, 0] * ray - omega[b, 1] * rax - wall_vel[w, 2]
+            weight = share_weight(delta) / facet_sum[f]
+            fx, fy, fz, f_n = sphere_contact_force(
+                nx,
+                ny,
+                nz,
+                delta,
+                vx,
+                vy,
+                vz,
+                weight,
+                k_n,
+                c_n,
+                k_t,
+                c_t,
+                mu_w,
+                wp_hist,
+                a,
+                hist_dt,
+            )
+            force[b, 0] += fx
+            force[b, 1] += fy
+            force[b, 2] += fz
+            torque[b, 0] += ray * fz - raz * fy
+            torque[b, 1] += raz * fx - rax * fz
+            torque[b, 2] += rax * fy - ray * fx
+            if spheres.core_count[wp_i[a]] > 0:
+                tx, ty, tz = patch_damping(
+                    nx,
+                    ny,
+                    nz,
+                    wall_pairs.moment[a, 0],
+                    wall_pairs.moment[a, 1],
+                    wall_pairs.moment[a, 2],
+                    omega[b, 0],
+                    omega[b, 1],
+                    omega[b, 2],
+                    weight * c_n,
+                    weight * c_t,
+                    mu_w * f_n,
+                )
+                torque[b, 0] += tx
+                torque[b, 1] += ty
+                torque[b, 2] += tz
+            n_contacts += 1
+        p = q_end
+    return n_contacts, -1

@@ -1,0 +1,107 @@
+"""Time integration of the rigid bodies: velocity Verlet as in LIGGGHTS, with the free-rotor
+splitting for rotation (``dem.quaternion.free_rotor_step``)::
+
+    kick:   v += dt/2 F/m;  L += dt/2 T            (L: world-frame angular momentum)
+    drift:  x += dt v;      q <- free rotor over dt
+    (forces at the new positions, ``dem/forces.py``)
+    kick:   v += dt/2 F/m;  L += dt/2 T
+
+and the kinematics that follow a drift: the spheres' world centres from the body poses, and
+omega = R I^-1 R^T L. The order of the stages is the run loop's (``dem/loop.py``). Kernels only,
+over the active bodies; they must not know about contacts or walls.
+"""
+
+from __future__ import annotations
+
+import numba
+
+from dem.conf import JIT_FLAGS
+from dem.quaternion import free_rotor_step, to_matrix
+
+
+@numba.njit(**JIT_FLAGS)
+def kick(bodies, h):
+    """v += h F/m, L += h T."""
+    active, vel, angmom, force, torque, mass = (
+        bodies.active,
+        bodies.vel,
+        bodies.angmom,
+        bodies.force,
+        bodies.torque,
+        bodies.mass,
+    )
+    for b in range(active.shape[0]):
+        if not active[b]:
+            continue
+        hm = h / mass[b]
+        for k in range(3):
+            vel[b, k] += hm * force[b, k]
+            angmom[b, k] += h * torque[b, k]
+
+
+@numba.njit(**JIT_FLAGS)
+def drift(bodies, lb, dt):
+    """x += dt v and the free rotor over dt; ``lb`` (3,) is scratch for the body-frame L."""
+    active, pos, vel, quat, angmom, inertia, rot = (
+        bodies.active,
+        bodies.pos,
+        bodies.vel,
+        bodies.quat,
+        bodies.angmom,
+        bodies.inertia,
+        bodies.rot,
+    )
+    for b in range(active.shape[0]):
+        if not active[b]:
+            continue
+        for k in range(3):
+            pos[b, k] += dt * vel[b, k]
+        r = rot[b]
+        for k in range(3):
+            lb[k] = r[0, k] * angmom[b, 0] + r[1, k] * angmom[b, 1] + r[2, k] * angmom[b, 2]
+        free_rotor_step(quat[b], lb, inertia[b], dt)
+        to_matrix(quat[b], rot[b])
+
+
+@numba.njit(**JIT_FLAGS)
+def update_spheres(spheres, bodies, x_build):
+    """World positions of the spheres; returns the largest squared move since ``x_build`` (the
+    positions at the last list build)."""
+    x, offset, sbody = spheres.x, spheres.offset, spheres.body
+    active, pos, rot = bodies.active, bodies.pos, bodies.rot
+    worst = 0.0
+    for s in range(x.shape[0]):
+        b = sbody[s]
+        if not active[b]:
+            continue
+        ox, oy, oz = offset[s, 0], offset[s, 1], offset[s, 2]
+        r = rot[b]
+        x[s, 0] = pos[b, 0] + r[0, 0] * ox + r[0, 1] * oy + r[0, 2] * oz
+        x[s, 1] = pos[b, 1] + r[1, 0] * ox + r[1, 1] * oy + r[1, 2] * oz
+        x[s, 2] = pos[b, 2] + r[2, 0] * ox + r[2, 1] * oy + r[2, 2] * oz
+        d2 = (x[s, 0] - x_build[s, 0]) ** 2 + (x[s, 1] - x_build[s, 1]) ** 2 + (x[s, 2] - x_build[s, 2]) ** 2
+        if d2 > worst:
+            worst = d2
+    return worst
+
+
+@numba.njit(**JIT_FLAGS)
+def update_omega(bodies):
+    """omega = R I^-1 R^T L for every active body."""
+    active, rot, angmom, inertia, omega = (
+        bodies.active,
+        bodies.rot,
+        bodies.angmom,
+        bodies.inertia,
+        bodies.omega,
+    )
+    for b in range(active.shape[0]):
+        if not active[b]:
+            continue
+        r = rot[b]
+        lx = r[0, 0] * angmom[b, 0] + r[1, 0] * angmom[b, 1] + r[2, 0] * angmom[b, 2]
+        ly = r[0, 1] * angmom[b, 0] + r[1, 1] * angmom[b, 1] + r[2, 1] * angmom[b, 2]
+        lz = r[0, 2] * angmom[b, 0] + r[1, 2] * angmom[b, 1] + r[2, 2] * angmom[b, 2]
+        wx, wy, wz = lx / inertia[b, 0], ly / inertia[b, 1], lz / inertia[b, 2]
+        for k in range(3):
+            omega[b, k] = r[k, 0] * wx + r[k, 1] * wy + r[k, 2] * wz

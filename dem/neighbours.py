@@ -1,0 +1,453 @@
+"""Verlet neighbour lists: which sphere pairs and sphere-facet pairs may touch before the next
+rebuild.
+
+A cell grid over the spheres' bounding box (cells at least the largest sphere diameter + skin,
+counting sort; not over the domain, which may be mostly empty) finds sphere pairs of different
+bodies closer than r_i + r_j + skin, and sphere-facet pairs closer than r + skin. The run loop
+(``dem/loop.py``) rebuilds the lists only when 2 max|dx_sphere| > skin; sphere-facet pairs of a
+moving wall are found with an extra margin of twice its amplitude, so wall motion never forces a
+rebuild. Sphere pairs are ordered by (body a, body b, sphere i, sphere j), so each body pair's
+sphere contacts are contiguous (a *group*: the resolution rule of ``dem/contact.py`` shares the
+pair's stiffness among them); sphere-facet pairs by (sphere, facet). Tangential history lives in
+an array parallel to each list and is carried across rebuilds by merging the two sorted lists.
+
+The containers (``Grid``, ``SpherePairs``, ``WallPairs``, bundled as ``Neighbours``) are built
+and grown here, in Python, between kernel calls; the kernels never allocate. A list that lacks
+room makes ``rebuild_lists`` return False with the room it needs in its ``count``; the driver
+grows it (``grown``) and resumes. The per-pair scratch of the force pass (overlap, normal, the
+group's contact-law constants) lives in the lists too, since it is sized and ordered by them;
+``dem/forces.py`` says what it means. This module must not compute forces.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from dem.conf import JIT_FLAGS
+from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
+
+# Layout of a list's ``count``: pairs in use, groups in use (sphere pairs), room needed after a
+# failed build.
+N_PAIRS, N_GROUPS, N_NEEDED = 0, 1, 2
+# Columns of ``SpherePairs.group_law`` (filled at each build by ``dem.forces.body_pair_laws``).
+G_KN, G_CN, G_KT, G_CT, G_MU = 0, 1, 2, 3, 4
+_MIN_CAPACITY = 1024
+
+
+class Grid(NamedTuple):
+    """The cell grid of the last build and the per-sphere state of the lists."""
+
+    dims: np.ndarray  # (3,) int64 cells per axis
+    origin: np.ndarray  # (4,) lower corner (3) and cell size of the last build
+    cell_start: np.ndarray  # (max_cells + 1,) int64 first entry of each cell in cell_items
+    cell_items: np.ndarray  # (n_spheres,) int64 spheres sorted by cell
+    sphere_cell: np.ndarray  # (n_spheres,) int64 each sphere's cell, -1 when its body is inactive
+    candidates: np.ndarray  # (n_spheres,) int64 scratch: one sphere's partners while sorting them
+    x_build: np.ndarray  # (n_spheres, 3) sphere centres at the last build (the skin criterion)
+
+
+class SpherePairs(NamedTuple):
+    """Sphere pairs of different bodies, grouped by body pair, with their tangential history."""
+
+    count: np.ndarray  # (3,) int64: N_PAIRS, N_GROUPS, N_NEEDED
+    i: np.ndarray  # (capacity,) int64 first sphere (i < j)
+    j: np.ndarray  # (capacity,) int64
+    hist: np.ndarray  # (capacity, 3) tangential spring elongation
+    group: np.ndarray  # (capacity,) int64 index of the body pair
+    new_i: np.ndarray  # (capacity,) int64 scratch of a rebuild
+    new_j: np.ndarray  # (capacity,) int64
+    new_hist: np.ndarray  # (capacity, 3)
+    delta: np.ndarray  # (capacity,) scratch of the force pass: overlap, -1 when apart
+    normal: np.ndarray  # (capacity, 3) scratch of the force pass: unit normal j -> i
+    group_sum: np.ndarray  # (capacity,) scratch of the force pass: the group's overlap sum
+    group_law: np.ndarray  # (capacity, 5) the group's contact-law constants, G_* columns
+    axis: np.ndarray  # (capacity, 3) rounded pieces: cached separating direction (any is valid)
+    point: np.ndarray  # (capacity, 3) scratch of the force pass: a piece pair's contact point
+    moment: np.ndarray  # (capacity, 3) scratch of the force pass: its patch's second moments
+
+
+class WallPairs(NamedTuple):
+    """Sphere-facet pairs sorted by (sphere, facet), with their tangential history."""
+
+    count: np.ndarray  # (3,) int64: N_PAIRS, unused, N_NEEDED
+    i: np.ndarray  # (capacity,) int64 sphere
+    f: np.ndarray  # (capacity,) int64 facet
+    hist: np.ndarray  # (capacity, 3)
+    new_i: np.ndarray  # (capacity,) int64 scratch of a rebuild
+    new_f: np.ndarray  # (capacity,) int64
+    new_hist: np.ndarray  # (capacity, 3)
+    delta: np.ndarray  # (capacity,) scratch of the force pass: overlap, -1 when apart
+    normal: np.ndarray  # (capacity, 3) scratch of the force pass: unit normal facet -> sphere
+    point: np.ndarray  # (capacity, 3) scratch of the force pass: closest point on the facet
+    keep: np.ndarray  # (capacity,) bool scratch of the force pass: the contact carries force
+    moment: np.ndarray  # (capacity, 3) scratch of the force pass: a piece's patch moments
+
+
+class Neighbours(NamedTuple):
+    grid: Grid
+    pairs: SpherePairs
+    wall_pairs: WallPairs
+
+
+# ------------------------------------------------------------------------------- containers
+
+
+def empty_neighbours() -> Neighbours:
+    """Lists for no spheres, with the minimum capacity."""
+    return Neighbours(
+        sized_grid(None, 0), _sphere_pairs(_MIN_CAPACITY, None), _wall_pairs(_MIN_CAPACITY, None)
+    )
+
+
+def sized_grid(grid: Grid | None, n_spheres: int) -> Grid:
+    """A grid for ``n_spheres`` (the same one if it fits), keeping the build positions of the
+    spheres it had."""
+    if grid is not None and len(grid.x_build) == n_spheres:
+        return grid
+    # At most this many cells (a few per sphere keeps the empty-cell overhead small); the kernel
+    # enlarges the cells when the spheres' bounding box needs more.
+    n_cells = max(8 * n_spheres, _MIN_CAPACITY)
+    x_build = np.zeros((n_spheres, 3))
+    if grid is not None:
+        keep = min(len(grid.x_build), n_spheres)
+        x_build[:keep] = grid.x_build[:keep]
+    return Grid(
+        np.ones(3, dtype=np.int64),
+        np.zeros(4),
+        np.zeros(n_cells + 1, dtype=np.int64),
+        np.zeros(n_spheres, dtype=np.int64),
+        np.zeros(n_spheres, dtype=np.int64),
+        np.zeros(n_spheres, dtype=np.int64),
+        x_build,
+    )
+
+
+def grown(lists: Neighbours) -> Neighbours:
+    """The lists with room for what the failed build needed (twice, to spare), entries kept."""
+    pairs, wall_pairs = lists.pairs, lists.wall_pairs
+    need_pp, need_wp = int(pairs.count[N_NEEDED]), int(wall_pairs.count[N_NEEDED])
+    cap_pp = max(_MIN_CAPACITY, 2 * need_pp, len(pairs.i))
+    cap_wp = max(_MIN_CAPACITY, 2 * need_wp, len(wall_pairs.i))
+    if cap_pp > len(pairs.i):
+        pairs = _sphere_pairs(cap_pp, pairs)
+    if cap_wp > len(wall_pairs.i):
+        wall_pairs = _wall_pairs(cap_wp, wall_pairs)
+    return Neighbours(lists.grid, pairs, wall_pairs)
+
+
+def _kept(new: np.ndarray, old: np.ndarray | None, n: int) -> np.ndarray:
+    if old is not None:
+        new[:n] = old[:n]
+    return new
+
+
+def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
+    n = int(old.count[N_PAIRS]) if old is not None else 0
+    count = old.count if old is not None else np.zeros(3, dtype=np.int64)
+
+    def ints(name):
+        return _kept(np.zeros(capacity, dtype=np.int64), getattr(old, name, None), n)
+
+    return SpherePairs(
+        count,
+        ints("i"),
+        ints("j"),
+        _kept(np.zeros((capacity, 3)), getattr(old, "hist", None), n),
+        ints("group"),
+        np.zeros(capacity, dtype=np.int64),
+        np.zeros(capacity, dtype=np.int64),
+        np.zeros((capacity, 3)),
+        np.zeros(capacity),
+        np.zeros((capacity, 3)),
+        np.zeros(capacity),
+        np.zeros((capacity, 5)),
+        np.zeros((capacity, 3)),
+        np.zeros((capacity, 3)),
+        np.zeros((capacity, 3)),
+    )
+
+
+def _wall_pairs(capacity: int, old: WallPairs | None) -> WallPairs:
+    n = int(old.count[N_PAIRS]) if old is not None else 0
+    count = old.count if old is not None else np.zeros(3, dtype=np.int64)
+    return WallPairs(
+        count,
+        _kept(np.zeros(capacity, dtype=np.int64), getattr(old, "i", None), n),
+        _kept(np.zeros(capacity, dtype=np.int64), getattr(old, "f", None), n),
+        _kept(np.zeros((capacity, 3)), getattr(old, "hist", None), n),
+        np.zeros(capacity, dtype=np.int64),
+        np.zeros(capacity, dtype=np.int64),
+        np.zeros((capacity, 3)),
+        np.zeros(capacity),
+        np.zeros((capacity, 3)),
+        np.zeros((capacity, 3)),
+        np.zeros(capacity, dtype=np.bool_),
+        np.zeros((capacity, 3)),
+    )
+
+
+# ------------------------------------------------------------------------------- kernels
+
+
+@numba.njit(**JIT_FLAGS)
+def rebuild_lists(lists, spheres, active, walls, skin, cell_min):
+    """Rebuild both neighbour lists, carrying the tangential history of surviving pairs.
+
+    ``active`` is the bodies' flag; ``skin`` the Verlet skin and ``cell_min`` the smallest cell
+    size (largest sphere diameter + skin). Returns False (lists untouched, needed sizes in their
+    ``count``) when a list lacks capacity.
+    """
+    grid, pairs, wall_pairs = lists.grid, lists.pairs, lists.wall_pairs
+    _fill_cells(grid, spheres.x, spheres.body, active, cell_min)
+    n_pp = _build_sphere_pairs(grid, spheres, skin, pairs.new_i, pairs.new_j)
+    n_wp = _build_wall_pairs(spheres, active, walls, skin, wall_pairs.new_i, wall_pairs.new_f)
+    if n_pp > pairs.new_i.shape[0] or n_wp > wall_pairs.new_i.shape[0]:
+        pairs.count[N_NEEDED] = n_pp
+        wall_pairs.count[N_NEEDED] = n_wp
+        return False
+    _adopt_sphere_pairs(pairs, spheres.body, active.shape[0], n_pp)
+    _adopt_wall_pairs(wall_pairs, n_wp)
+    x, x_build = spheres.x, grid.x_build
+    for s in range(x.shape[0]):
+        for k in range(3):
+            x_build[s, k] = x[s, k]
+    return True
+
+
+@numba.njit(**JIT_FLAGS)
+def _fill_cells(grid, x, sbody, active, cell_min):
+    """Counting sort of the spheres into a grid over their bounding box, with cells enlarged if
+    the box needs more cells than allocated."""
+    dims, origin, cell_start, cell_items, sphere_cell = (
+        grid.dims,
+        grid.origin,
+        grid.cell_start,
+        grid.cell_items,
+        grid.sphere_cell,
+    )
+    ns = x.shape[0]
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for s in range(ns):
+        if active[sbody[s]]:
+            for k in range(3):
+                lo[k] = min(lo[k], x[s, k])
+                hi[k] = max(hi[k], x[s, k])
+    h = cell_min
+    max_cells = cell_start.shape[0] - 1
+    while True:
+        n_cells = 1
+        for k in range(3):
+            dims[k] = max(int((hi[k] - lo[k]) / h) + 1, 1) if hi[k] >= lo[k] else 1
+            n_cells *= dims[k]
+        if n_cells <= max_cells:
+            break
+        h *= 1.25
+    for k in range(3):
+        origin[k] = lo[k] if hi[k] >= lo[k] else 0.0
+    origin[3] = h
+    for c in range(n_cells + 1):
+        cell_start[c] = 0
+    for s in range(ns):
+        if not active[sbody[s]]:
+            sphere_cell[s] = -1
+            continue
+        ix = min(max(int((x[s, 0] - origin[0]) / h), 0), dims[0] - 1)
+        iy = min(max(int((x[s, 1] - origin[1]) / h), 0), dims[1] - 1)
+        iz = min(max(int((x[s, 2] - origin[2]) / h), 0), dims[2] - 1)
+        c = (iz * dims[1] + iy) * dims[0] + ix
+        sphere_cell[s] = c
+        cell_start[c + 1] += 1
+    for c in range(n_cells):
+        cell_start[c + 1] += cell_start[c]
+    for s in range(ns):
+        c = sphere_cell[s]
+        if c >= 0:
+            cell_items[cell_start[c]] = s
+            cell_start[c] += 1
+    for c in range(n_cells, 0, -1):
+        cell_start[c] = cell_start[c - 1]
+    cell_start[0] = 0
+
+
+@numba.njit(**JIT_FLAGS)
+def _build_sphere_pairs(grid, spheres, skin, new_i, new_j):
+    """Candidate sphere pairs (i < j, different bodies) sorted by (i, j); returns their number
+    (which may exceed the capacity of ``new_i``: then only counting)."""
+    dims, cell_start, cell_items, sphere_cell, tmp = (
+        grid.dims,
+        grid.cell_start,
+        grid.cell_items,
+        grid.sphere_cell,
+        grid.candidates,
+    )
+    x, radius, sbody = spheres.x, spheres.radius, spheres.body
+    cap = new_i.shape[0]
+    n = 0
+    nx_, ny_ = dims[0], dims[1]
+    for i in range(x.shape[0]):
+        c = sphere_cell[i]
+        if c < 0:
+            continue
+        ix = c % nx_
+        iy = (c // nx_) % ny_
+        iz = c // (nx_ * ny_)
+        m = 0
+        for oz in range(max(iz - 1, 0), min(iz + 2, dims[2])):
+            for oy in range(max(iy - 1, 0), min(iy + 2, dims[1])):
+                for ox in range(max(ix - 1, 0), min(ix + 2, dims[0])):
+                    cc = (oz * ny_ + oy) * nx_ + ox
+                    for k in range(cell_start[cc], cell_start[cc + 1]):
+                        j = cell_items[k]
+                        if j <= i or sbody[j] == sbody[i]:
+                            continue
+                        cut = radius[i] + radius[j] + skin
+                        d2 = (x[i, 0] - x[j, 0]) ** 2 + (x[i, 1] - x[j, 1]) ** 2 + (x[i, 2] - x[j, 2]) ** 2
+                        if d2 < cut * cut:
+                            tmp[m] = j
+                            m += 1
+        for a in range(1, m):  # insertion sort: the per-sphere lists are short
+            v = tmp[a]
+            b = a - 1
+            while b >= 0 and tmp[b] > v:
+                tmp[b + 1] = tmp[b]
+                b -= 1
+            tmp[b + 1] = v
+        for a in range(m):
+            if n < cap:
+                new_i[n] = i
+                new_j[n] = tmp[a]
+            n += 1
+    return n
+
+
+@numba.njit(**JIT_FLAGS)
+def _build_wall_pairs(spheres, active, walls, skin, new_i, new_f):
+    """Candidate sphere-facet pairs sorted by (sphere, facet); returns their number (which may
+    exceed the capacity of ``new_i``: then only counting)."""
+    x, radius, sbody = spheres.x, spheres.radius, spheres.body
+    facets, wall_disp, motion = walls.facets, walls.disp, walls.motion
+    f_wall, f_lo, f_hi = facets.wall, facets.lo, facets.hi
+    cap = new_i.shape[0]
+    n = 0
+    for i in range(x.shape[0]):
+        if not active[sbody[i]]:
+            continue
+        for f in range(f_wall.shape[0]):
+            w = f_wall[f]
+            # A moving wall stays within twice its amplitude of where it is now, so pairs found
+            # with that margin stay valid however far it moves: no rebuild for wall motion.
+            reach = radius[i] + skin + 2.0 * motion[w, 4]
+            outside = False
+            for k in range(3):
+                xk = x[i, k] - wall_disp[w, k]
+                if xk < f_lo[f, k] - reach or xk > f_hi[f, k] + reach:
+                    outside = True
+            if outside:
+                continue
+            s = plane_distance(
+                x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
+            )
+            if s * s >= reach * reach * PLANE_SLACK:
+                continue
+            d2, _, _, _, _ = closest_point_on_facet(
+                x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
+            )
+            if d2 < reach * reach:
+                if n < cap:
+                    new_i[n] = i
+                    new_f[n] = f
+                n += 1
+    return n
+
+
+@numba.njit(**JIT_FLAGS)
+def _pair_before(ba, bb, i, j, ca, cb, k, m):
+    """Order of sphere pairs: (body a, body b, sphere i, sphere j) lexicographic."""
+    if ba != ca:
+        return ba < ca
+    if bb != cb:
+        return bb < cb
+    if i != k:
+        return i < k
+    return j < m
+
+
+@numba.njit(**JIT_FLAGS)
+def _adopt_sphere_pairs(pairs, sbody, nb, n_pp):
+    """Group the ``n_pp`` new pairs by body pair, carry the history of surviving pairs, number
+    the groups and make the new pairs current."""
+    new_i, new_j, new_hist = pairs.new_i, pairs.new_j, pairs.new_hist
+    pp_i, pp_j, pp_hist, pp_group = pairs.i, pairs.j, pairs.hist, pairs.group
+    # Group the sphere pairs of each body pair (a stable sort keeps (i, j) order inside).
+    ordered = True
+    for p in range(1, n_pp):
+        if sbody[new_i[p]] * nb + sbody[new_j[p]] < sbody[new_i[p - 1]] * nb + sbody[new_j[p - 1]]:
+            ordered = False
+            break
+    if not ordered:
+        keys = np.empty(n_pp, dtype=np.int64)
+        for p in range(n_pp):
+            keys[p] = sbody[new_i[p]] * nb + sbody[new_j[p]]
+        order = np.argsort(keys, kind="mergesort")
+        si = new_i[:n_pp].copy()
+        sj = new_j[:n_pp].copy()
+        for p in range(n_pp):
+            new_i[p] = si[order[p]]
+            new_j[p] = sj[order[p]]
+
+    # Carry history: both lists are sorted the same way, so one merge pass suffices.
+    old = 0
+    n_old = pairs.count[N_PAIRS]
+    for p in range(n_pp):
+        i, j = new_i[p], new_j[p]
+        ba, bb = sbody[i], sbody[j]
+        while old < n_old and _pair_before(
+            sbody[pp_i[old]], sbody[pp_j[old]], pp_i[old], pp_j[old], ba, bb, i, j
+        ):
+            old += 1
+        if old < n_old and pp_i[old] == i and pp_j[old] == j:
+            for k in range(3):
+                new_hist[p, k] = pp_hist[old, k]
+        else:
+            for k in range(3):
+                new_hist[p, k] = 0.0
+    n_groups = 0
+    for p in range(n_pp):
+        pp_i[p] = new_i[p]
+        pp_j[p] = new_j[p]
+        for k in range(3):
+            pp_hist[p, k] = new_hist[p, k]
+        if p > 0 and (sbody[new_i[p]] != sbody[new_i[p - 1]] or sbody[new_j[p]] != sbody[new_j[p - 1]]):
+            n_groups += 1
+        pp_group[p] = n_groups
+    pairs.count[N_GROUPS] = n_groups + 1 if n_pp > 0 else 0
+    pairs.count[N_PAIRS] = n_pp
+
+
+@numba.njit(**JIT_FLAGS)
+def _adopt_wall_pairs(wall_pairs, n_wp):
+    """Carry the history of surviving sphere-facet pairs and make the ``n_wp`` new pairs current."""
+    new_wi, new_wf, new_whist = wall_pairs.new_i, wall_pairs.new_f, wall_pairs.new_hist
+    wp_i, wp_f, wp_hist = wall_pairs.i, wall_pairs.f, wall_pairs.hist
+    old = 0
+    n_old = wall_pairs.count[N_PAIRS]
+    for p in range(n_wp):
+        i, f = new_wi[p], new_wf[p]
+        while old < n_old and (wp_i[old] < i or (wp_i[old] == i and wp_f[old] < f)):
+            old += 1
+        if old < n_old and wp_i[old] == i and wp_f[old] == f:
+            for k in range(3):
+                new_whist[p, k] = wp_hist[old, k]
+        else:
+            for k in range(3):
+                new_whist[p, k] = 0.0
+    for p in range(n_wp):
+        wp_i[p] = new_wi[p]
+        wp_f[p] = new_wf[p]
+        for k in range(3):
+            wp_hist[p, k] = new_whist[p, k]
+    wall_pairs.count[N_PAIRS] = n_wp

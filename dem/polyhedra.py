@@ -1,0 +1,247 @@
+r"""Rounded polyhedra (sphero-polyhedra): a rigid body's shape as convex cores swept by a sphere.
+
+A piece is the Minkowski sum of a convex polyhedron, its *core*, and a ball of radius r (the
+*rounding*): flat faces, edges rounded with radius r, no gaps. A body is one piece (a phone, a
+box) or a union of convex pieces (a camera: body slab and lens barrel). Contacts are computed
+between cores (``dem/convex.py``): overlap ``delta = r_a + r_b - distance``.
+
+From a mesh (``make_polyhedron``): each convex piece (the mesh's convex hull unless pieces are
+given) is shrunk by r, exactly: a convex polytope ``{x : n_i . x <= h_i}`` swept by a ball of
+radius r after its faces moved inwards by r, ``{x : n_i . x <= h_i - r}``, is the polytope with
+its edges and corners rounded (radius r), so faces stay where they were. r is the user's, or
+``ROUNDING_FRACTION`` of the piece's thinnest dimension. Mass, centre of mass and inertia come
+from the mesh (``dem.mesh.mass_properties``), as for clumps.
+
+Non-convex meshes need pieces: ``convex_pieces`` documents the decomposition used (CoACD,
+Wei et al., SIGGRAPH 2022); built-in items pass their known parts. This module builds
+geometry; it computes no forces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+from scipy.spatial import ConvexHull, HalfspaceIntersection
+
+from dem.mesh import MeshError, mass_properties
+
+ROUNDING_FRACTION = 0.25  # default r as a fraction of a piece's thinnest dimension
+MAX_CORE_VERTICES = 48  # a core with more vertices is simplified (support queries cost O(n))
+
+
+class PolyhedronError(MeshError):
+    """A rounded polyhedron cannot be made as asked; the message says what to change."""
+
+
+@dataclass(frozen=True)
+class Polyhedron:
+    """Convex cores (one per piece) and mass properties of one rigid body.
+
+    ``core`` holds every piece's vertices in the principal frame (origin at the centre of mass,
+    ``diag(inertia)`` the inertia tensor), piece k being rows ``piece_start[k]`` to
+    ``piece_start[k] + piece_count[k]``; ``com`` and ``axes`` place that frame in the mesh.
+    """
+
+    core: np.ndarray  # (n, 3) m
+    piece_start: np.ndarray  # (p,)
+    piece_count: np.ndarray  # (p,)
+    rounding: float  # r, m
+    mass: float
+    inertia: np.ndarray  # (3,)
+    volume: float
+    com: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    axes: np.ndarray = field(default_factory=lambda: np.eye(3))
+    name: str = ""
+
+    @property
+    def n_pieces(self) -> int:
+        return int(len(self.piece_start))
+
+    def piece(self, k: int) -> np.ndarray:
+        return self.core[self.piece_start[k] : self.piece_start[k] + self.piece_count[k]]
+
+    def piece_centre(self, k: int) -> np.ndarray:
+        """Centre of piece k's bounding sphere (body frame): the middle of its bounding box."""
+        core = self.piece(k)
+        return 0.5 * (core.min(axis=0) + core.max(axis=0))
+
+    def piece_reach(self, k: int) -> float:
+        """Radius of piece k's bounding sphere about ``piece_centre(k)``, rounding included."""
+        return float(np.linalg.norm(self.piece(k) - self.piece_centre(k), axis=1).max()) + self.rounding
+
+    @property
+    def equivalent_diameter(self) -> float:
+        """Diameter of the sphere of equal volume: the body's contact size in the contact law."""
+        return float((6.0 * self.volume / np.pi) ** (1.0 / 3.0))
+
+    def surface_mesh(self, sections: int = 8) -> trimesh.Trimesh:
+        """The rounded shape (body frame) as a triangle mesh, for pictures and checks."""
+        ball = trimesh.creation.icosphere(subdivisions=1 if sections <= 8 else 2, radius=self.rounding)
+        parts = []
+        for k in range(self.n_pieces):
+            points = (self.piece(k)[:, None, :] + ball.vertices[None, :, :]).reshape(-1, 3)
+            parts.append(trimesh.convex.convex_hull(points))
+        return trimesh.util.concatenate(parts)
+
+    @classmethod
+    def box(cls, size, rounding: float, density: float, name: str = "box") -> Polyhedron:
+        """A box of outer ``size`` with edges rounded by ``rounding``; mass properties are the
+        sharp box's (those of its mesh, as ``make_polyhedron`` takes them)."""
+        size = np.asarray(size, dtype=np.float64)
+        if not 0 < rounding < 0.5 * size.min():
+            raise PolyhedronError(f"rounding must be in (0, {0.5 * size.min()}) m, got {rounding}")
+        half = 0.5 * size - rounding
+        core = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+        volume = float(np.prod(size))
+        mass = density * volume
+        a, b, c = size
+        inertia = mass / 12 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
+        return cls(core, np.array([0]), np.array([8]), float(rounding), mass, inertia, volume, name=name)
+
+
+def shrink_convex(points: np.ndarray, rounding: float) -> np.ndarray:
+    """Vertices of the convex hull of ``points`` with every face moved inwards by ``rounding``."""
+    hull = ConvexHull(points)
+    equations = hull.equations.copy()  # rows (n, c): n . x + c <= 0 inside
+    equations[:, 3] += rounding
+    centre = points[hull.vertices].mean(axis=0)
+    depth = -(equations[:, :3] @ centre + equations[:, 3])
+    if depth.min() <= 1e-9 * np.ptp(points, axis=0).max():
+        raise PolyhedronError(
+            f"rounding {rounding:.4g} m leaves no core: the piece is thinner than 2 r; use a smaller rounding"
+        )
+    core = HalfspaceIntersection(equations, centre).intersections
+    scale = float(np.ptp(core, axis=0).max())
+    keys = np.round(core / max(scale * 1e-9, 1e-15)).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    core = core[np.sort(first)]
+    return core[ConvexHull(core).vertices] if len(core) > 3 else core
+
+
+def thinnest_dimension(points: np.ndarray) -> float:
+    """Smallest extent of ``points`` along the principal axes of their hull's oriented box."""
+    obb = trimesh.convex.convex_hull(points).bounding_box_oriented
+    return float(np.min(obb.primitive.extents))
+
+
+def convex_pieces(
+    mesh: trimesh.Trimesh, max_pieces: int = 8, threshold: float = 0.05
+) -> list[trimesh.Trimesh]:
+    """The mesh itself if it is convex, else its approximate convex decomposition by CoACD (Wei,
+    Liu, Wang & Luo, "Approximate convex decomposition for 3D meshes with collision-aware
+    concavity and tree search", SIGGRAPH 2022): at most ``max_pieces`` pieces, each within
+    ``threshold`` (relative to the mesh size) of convex. Seconds per mesh: decompose once per
+    kind and map the pieces to variants (``deform_polyhedron``)."""
+    if mesh.is_convex:
+        return [mesh]
+    try:
+        import coacd
+    except ImportError as exc:
+        raise PolyhedronError(
+            "non-convex mesh: install coacd to decompose it, or give its convex pieces"
+        ) from exc
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(
+        coacd.Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
+        threshold=threshold,
+        max_convex_hull=max_pieces,
+    )
+    if not parts:
+        raise PolyhedronError("CoACD returned no convex pieces; check that the mesh is watertight")
+    return [trimesh.Trimesh(vertices=v, faces=f) for v, f in parts]
+
+
+def make_polyhedron(
+    mesh: trimesh.Trimesh,
+    *,
+    mass: float | None = None,
+    density: float | None = None,
+    rounding: float | None = None,
+    pieces: list[trimesh.Trimesh] | None = None,
+    name: str = "",
+) -> Polyhedron:
+    """The rounded polyhedron of a watertight mesh (metres), mass properties from the mesh.
+
+    ``pieces`` (convex meshes in the mesh's coordinates) default to ``convex_pieces(mesh)``;
+    ``rounding`` to ``ROUNDING_FRACTION`` of the thinnest piece's thinnest dimension.
+    """
+    properties = mass_properties(mesh, mass=mass, density=density)
+    pieces = convex_pieces(mesh) if pieces is None else pieces
+    if not pieces:
+        raise PolyhedronError("no convex pieces given")
+    hulls = [np.asarray(trimesh.convex.convex_hull(np.asarray(p.vertices)).vertices) for p in pieces]
+    if rounding is None:
+        rounding = ROUNDING_FRACTION * min(thinnest_dimension(h) for h in hulls)
+    if not rounding > 0:
+        raise PolyhedronError(f"rounding must be a positive length in metres, got {rounding}")
+    cores, starts, counts = [], [], []
+    for hull in hulls:
+        core = shrink_convex(hull, rounding)
+        if len(core) > MAX_CORE_VERTICES:
+            core = _simplify(core)
+        starts.append(sum(counts))
+        counts.append(len(core))
+        cores.append(core)
+    return _assemble(np.concatenate(cores), np.array(starts), np.array(counts), rounding, properties, name)
+
+
+def _assemble(mesh_core, starts, counts, rounding, properties, name) -> Polyhedron:
+    """A Polyhedron from cores in mesh coordinates and the mesh's mass properties: the cores are
+    moved into the principal frame, mass and inertia are the mesh's own."""
+    return Polyhedron(
+        core=np.ascontiguousarray((mesh_core - properties.com) @ properties.principal_axes),
+        piece_start=np.asarray(starts, dtype=np.int64),
+        piece_count=np.asarray(counts, dtype=np.int64),
+        rounding=float(rounding),
+        mass=properties.mass,
+        inertia=properties.principal_moments,
+        volume=properties.volume,
+        com=properties.com,
+        axes=properties.principal_axes,
+        name=name,
+    )
+
+
+def _simplify(core: np.ndarray) -> np.ndarray:
+    """At most MAX_CORE_VERTICES vertices: farthest-point sampling of the hull's vertices (keeps
+    the extreme ones, so the core shrinks by at most the spacing's sagitta)."""
+    chosen = [int(np.argmax(np.linalg.norm(core - core.mean(axis=0), axis=1)))]
+    distance = np.linalg.norm(core - core[chosen[0]], axis=1)
+    while len(chosen) < MAX_CORE_VERTICES:
+        k = int(np.argmax(distance))
+        chosen.append(k)
+        distance = np.minimum(distance, np.linalg.norm(core - core[k], axis=1))
+    return core[np.sort(chosen)]
+
+
+def deform_polyhedron(
+    poly: Polyhedron, matrix: np.ndarray, mesh: trimesh.Trimesh, *, mass: float, name: str = ""
+) -> Polyhedron:
+    """The polyhedron of ``mesh`` = ``matrix`` applied to the mesh ``poly`` was made from: cores
+    map through ``matrix`` (still convex), the rounding scales by its smallest singular value;
+    mass properties are the new mesh's."""
+    matrix = np.asarray(matrix, dtype=np.float64)
+    properties = mass_properties(mesh, mass=mass)
+    mesh_core = (poly.com + poly.core @ poly.axes.T) @ matrix.T
+    rounding = poly.rounding * float(np.linalg.svd(matrix, compute_uv=False).min())
+    return _assemble(mesh_core, poly.piece_start, poly.piece_count, rounding, properties, name)
+
+
+def surface_gap(poly: Polyhedron, mesh: trimesh.Trimesh, n_samples: int = 4000, seed: int = 1):
+    """(largest, mean) distance from points on the mesh surface to the rounded shape's surface, m:
+    how far the shape departs from the mesh (compare ``dem.clumping.clump_fit``)."""
+    from dem.convex import gjk_distance
+
+    points, _ = trimesh.sample.sample_surface_even(mesh, n_samples, seed=seed)
+    local = np.ascontiguousarray((np.asarray(points) - poly.com) @ poly.axes)
+    eye, origin = np.eye(3), np.zeros(3)
+    gaps = np.empty(len(local))
+    for s in range(len(local)):
+        nearest = min(
+            gjk_distance(local, s, 1, eye, origin, poly.core, start, count, eye, origin)[0]
+            for start, count in zip(poly.piece_start, poly.piece_count, strict=True)
+        )
+        gaps[s] = abs(nearest - poly.rounding)
+    return float(gaps.max()), float(gaps.mean())

@@ -1,0 +1,227 @@
+"""What every scenario declares, so that nothing outside ``dem/scenarios/`` needs to know one.
+
+A scenario is one laboratory experiment made a simulation (the vibration feeder, a heap's angle
+of repose). Its module defines a ``Scenario`` object and registers it in
+``dem/scenarios/registry.py`` under its ``kind``; studies, workers, the API and the CLI then reach
+it only through ``registry.get(kind)``.
+
+A scenario declares:
+
+* ``kind`` — the name a study's ``[scenario]`` table carries as ``kind = "..."``;
+* ``config_model`` — a pydantic model of its configuration, with a ``kind: Literal[...]`` field
+  (the discriminator of ``StudyDefinition.scenario``) and a ``params`` section of default contact
+  parameters (``ParamsConfig``);
+* ``responses`` — the named quantities a run measures (``Response``: unit, integer or real, and the
+  value a failed run gets, which the objectives use as the worst case);
+* ``cost_estimate(config, params)`` — the run's expected work in body-steps (bodies x time steps),
+  which sizes job timeouts and orders trials longest first; and ``time_step(config, params)``,
+  the step the engine will take (a cheap estimate);
+* ``run(config, params, seed, control)`` — one run with the built-in engine; it never raises and
+  returns a ``dem.result.SimulationResult`` whose ``responses`` holds every declared response
+  (``None`` when the run failed);
+* ``engines`` — which engines can run it (``"numba"`` always; ``"liggghts"`` when an adapter exists
+  in ``dem/engines/liggghts.py``; ``"command"`` for any scenario).
+
+How to add a scenario (the angle of repose, ``dem/scenarios/heap.py``, followed this recipe):
+
+1. write ``dem/scenarios/<name>.py`` with a config model (``kind`` literal + ``params``), its
+   ``run`` and a module-level ``SCENARIO = Scenario(...)``;
+2. add its module to ``BUILT_IN`` in ``dem/scenarios/registry.py``;
+3. add a quick example config under ``examples/`` and tests under ``tests/dem/``: the registry test
+   then checks the declaration (every response produced, cost positive, JSON round trip).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+
+from dem.parameters import PARAMETER_NAMES, range_problem
+from dem.result import SimulationResult
+
+
+class Section(BaseModel):
+    """A config section: unknown keys are errors, so a typo never silently keeps a default."""
+
+    # Every number finite: ``inf`` or ``nan`` would only fail later, in a worker.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class ParamsConfig(Section):
+    """Contact parameters used when the caller does not give them (the paper's Table 2 area);
+    their ranges are ``dem/parameters.py``'s."""
+
+    E: float = Field(1e7, description="Young's modulus, Pa.")
+    nu: float = Field(0.3, description="Poisson's ratio.")
+    e: float = Field(0.5, description="Restitution coefficient.")
+    mu: float = Field(0.5, description="Friction coefficient.")
+
+    @field_validator(*PARAMETER_NAMES)
+    @classmethod
+    def _physical(cls, value: float, info: ValidationInfo) -> float:
+        problem = range_problem(info.field_name, value)
+        if problem is not None:
+            raise ValueError(problem)
+        return value
+
+
+@dataclass(frozen=True)
+class Response:
+    """One measured quantity of a scenario."""
+
+    name: str
+    unit: str  # "1" for counts and other pure numbers
+    integer: bool
+    failed_value: float  # what a failed run counts as in the objectives: the worst plausible value
+    description: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "unit": self.unit,
+            "type": "integer" if self.integer else "real",
+            "failed_value": self.failed_value,
+            "description": self.description,
+        }
+
+
+@dataclass
+class RunControl:
+    """How a caller steers a run: a wall-clock deadline (``time.monotonic()``), a stop request
+    polled between chunks, a progress callback (simulated time, a scenario-specific count) and
+    optional output folders (snapshots for the dashboard's replay, ParaView files)."""
+
+    deadline: float | None = None
+    should_stop: Callable[[], bool] | None = None
+    progress: Callable[[float, int], None] | None = None
+    snapshot_dir: Path | None = None
+    vtk_dir: Path | None = None
+
+
+RunFunction = Callable[[Any, dict[str, float], int, RunControl], SimulationResult]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A registered scenario kind; see the module docstring."""
+
+    kind: str
+    title: str
+    config_model: type[BaseModel]
+    responses: tuple[Response, ...]
+    run_function: RunFunction
+    cost_function: Callable[[Any, dict[str, float]], float]
+    time_step_function: Callable[[Any, dict[str, float]], float]
+    responses_function: Callable[[Any], tuple[Response, ...]] | None = None  # config-dependent responses
+    duration_function: Callable[[Any], float] | None = None  # simulated s a run lasts at most
+    load_function: Callable[[Path], BaseModel] | None = None  # a TOML file with paths made absolute
+    failed_function: Callable[[Any], dict[str, float]] | None = None  # config-dependent worst values
+    engines: tuple[str, ...] = ("numba", "command")
+    progress_label: str = "bodies"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def config(self, data: dict[str, Any] | BaseModel) -> BaseModel:
+        """Validate a config given as a mapping (``kind`` may be omitted)."""
+        if isinstance(data, self.config_model):
+            return data
+        return self.config_model.model_validate({**dict(data), "kind": self.kind})
+
+    def declared(self, config=None) -> tuple[Response, ...]:
+        """The responses a run of this config measures (a combined scenario's depend on its parts)."""
+        if self.responses_function is not None and config is not None:
+            return tuple(self.responses_function(self.config(config)))
+        return self.responses
+
+    def response(self, name: str, config=None) -> Response:
+        declared = self.declared(config)
+        for response in declared:
+            if response.name == name:
+                return response
+        known = ", ".join(r.name for r in declared)
+        raise KeyError(f"scenario {self.kind!r} has no response {name!r}; it measures {known}")
+
+    def run(self, config, params: dict[str, float], seed: int, control: RunControl | None = None):
+        return self.run_function(self.config(config), dict(params), int(seed), control or RunControl())
+
+    def cost_estimate(self, config, params: dict[str, float]) -> float:
+        return float(self.cost_function(self.config(config), dict(params)))
+
+    def time_step(self, config, params: dict[str, float]) -> float:
+        return float(self.time_step_function(self.config(config), dict(params)))
+
+    def duration(self, config) -> float | None:
+        """Simulated seconds a run lasts at most (progress bars and logs); None if unknown."""
+        return None if self.duration_function is None else float(self.duration_function(self.config(config)))
+
+    def describe(self, responses: dict[str, Any], config=None) -> str:
+        """Responses as text with units: 'angle_deg=21.3 deg, height=0.04 m'."""
+        parts = []
+        for r in self.declared(config):
+            value = responses.get(r.name)
+            shown = "-" if value is None else (f"{int(value)}" if r.integer else f"{value:.4g}")
+            parts.append(f"{r.name}={shown}" + ("" if r.unit == "1" or value is None else f" {r.unit}"))
+        return ", ".join(parts)
+
+    def failed_responses(self, config=None) -> dict[str, float | int]:
+        """What each response counts as when a run failed (the config may change the worst case)."""
+        declared = self.declared(config)
+        values = {r.name: r.failed_value for r in declared}
+        if config is not None and self.failed_function is not None:
+            values.update(self.failed_function(self.config(config)))
+        return {r.name: (int(values[r.name]) if r.integer else float(values[r.name])) for r in declared}
+
+
+def merged_params(config_params: ParamsConfig, params: dict[str, float]) -> tuple[dict[str, float], str]:
+    """The run's contact parameters (the caller's over the config's) and an error, '' when usable."""
+    merged = {**config_params.model_dump(), **params}
+    unknown = sorted(set(params) - set(PARAMETER_NAMES))
+    if unknown:
+        return _floats(merged), (
+            f"unknown parameter(s) {', '.join(unknown)}; scenarios take {', '.join(PARAMETER_NAMES)}"
+        )
+    try:
+        return ParamsConfig.model_validate(merged).model_dump(), ""
+    except Exception as exc:  # pydantic ValidationError, or a value that is not a number
+        return _floats(merged), f"bad parameters: {exc}"
+
+
+def _floats(values: dict) -> dict[str, float]:
+    """Parameters as floats where they are numbers, so that an error result still validates."""
+    out = {}
+    for key, value in values.items():
+        try:
+            out[str(key)] = float(value)
+        except (TypeError, ValueError):
+            out[str(key)] = math.nan
+    return out
+
+
+def nearest_key(model: type[BaseModel] | None, loc: Sequence[Any]) -> str | None:
+    """The valid key closest to an unknown one at ``loc`` (a pydantic error location) in
+    ``model``, for "did you mean ...?"; None when nothing is close or the path leaves the models."""
+    current = model
+    for part in loc[:-1]:
+        field = current.model_fields.get(str(part)) if current is not None else None
+        if field is None:
+            return None
+        candidates = [field.annotation, *getattr(field.annotation, "__args__", ())]
+        current = next((c for c in candidates if isinstance(c, type) and issubclass(c, BaseModel)), None)
+    if current is None or not loc:
+        return None
+    close = difflib.get_close_matches(str(loc[-1]), list(current.model_fields), n=1, cutoff=0.6)
+    return close[0] if close else None
+
+
+def error_message(err: dict[str, Any], model: type[BaseModel] | None) -> str:
+    """One pydantic error's message; an unknown key names the nearest valid one."""
+    message = str(err.get("msg", "invalid")).removeprefix("Value error, ")
+    if err.get("type") == "extra_forbidden":
+        near = nearest_key(model, tuple(err.get("loc", ())))
+        message = f"unknown key{f'; did you mean {near!r}?' if near else ''}"
+    return message

@@ -1,0 +1,55 @@
+r"""The linear contact model's range of validity, before a run: how deep an impact goes.
+
+The linear spring-dashpot law (``dem/contact.py``) stands for a contact whose overlap is small
+against the spheres that touch; the engine ends a run ``invalid`` once an overlap passes
+``OVERLAP_LIMIT`` of a sphere radius while the step resolves the contact (``dem/simulation.py``).
+Whether that happens is decided by the hardest impact: a body of mass m hitting a wall at speed
+v with the pair's stiffness K and damping ratio zeta (from e) compresses to
+
+    delta_max = (v / omega_0) g(zeta),   omega_0 = sqrt(K / m),
+
+where g is the peak of x'' + 2 zeta x' + x = 0, x(0) = 0, x'(0) = 1: ``exp(-zeta t*)`` with
+``t* = atan2(sqrt(1 - zeta^2), zeta) / sqrt(1 - zeta^2)`` below critical damping (g = 1 without
+damping), and the two-exponential peak above it. The clamp against attraction does not matter
+here: the force is compressive all the way to the peak. Inverting for ``delta_max = limit r``
+gives the softest E for which that impact stays valid; ``K = E D / 2`` against a wall of the same
+material.
+"""
+
+from __future__ import annotations
+
+import math
+
+from dem.contact import damping_ratio, wall_stiffness
+from dem.result import OVERLAP_LIMIT
+
+
+def peak_factor(zeta: float) -> float:
+    """g(zeta): the peak overlap of a damped linear impact in units of v / omega_0."""
+    if zeta <= 0.0:
+        return 1.0
+    if abs(zeta - 1.0) < 1e-9:
+        return math.exp(-1.0)
+    if zeta < 1.0:
+        wd = math.sqrt(1.0 - zeta * zeta)
+        return math.exp(-zeta * math.atan2(wd, zeta) / wd)
+    root = math.sqrt(zeta * zeta - 1.0)
+    r1, r2 = -zeta + root, -zeta - root
+    t = math.log(r2 / r1) / (r1 - r2)
+    return (math.exp(r1 * t) - math.exp(r2 * t)) / (r1 - r2)
+
+
+def peak_overlap(speed: float, mass: float, stiffness: float, e: float) -> float:
+    """Deepest overlap (m) of an impact at ``speed`` of ``mass`` on a spring of ``stiffness``."""
+    return speed * math.sqrt(mass / stiffness) * peak_factor(damping_ratio(e))
+
+
+def softest_valid_E(
+    speed: float, mass: float, diameter: float, radius: float, e: float, limit: float = OVERLAP_LIMIT
+) -> float:
+    """The E below which a body (mass, contact diameter D, smallest sphere radius r) hitting a
+    wall of its own material at ``speed`` overlaps more than ``limit`` r."""
+    # delta_max scales as 1 / sqrt(K) and K = E D / 2 is linear in E.
+    reference = 1.0
+    depth = peak_overlap(speed, mass, wall_stiffness(reference, diameter, reference), e)
+    return reference * (depth / (limit * radius)) ** 2

@@ -1,0 +1,109 @@
+"""Identifiability: which contact parameters the experiment pins down, and which it does not.
+
+Two views, both from a study's own simulations (no new runs):
+
+- **Sensitivity** of the response: variance-based (Sobol) indices of the surrogate's mean of
+  ``2 sqrt(N_t + 3/8)`` over the search box (the same Gaussian process the surrogate search
+  fits, ``optimizer/surrogate.py``), estimated with Saltelli's first-order and Jansen's total
+  estimators on a scrambled Sobol sample. A parameter with a small total index barely changes
+  N_t anywhere in the box: no N_t experiment can determine it. The fitted ARD length scale says
+  the same in other words (long = flat) and is reported beside it.
+- **Spread of the matching sets**: the range of each parameter over the sets that matched,
+  as a share of its searched range (log scale for E). A parameter that matches across most of
+  its range is not pinned down by this experiment, whatever its global sensitivity (the paper's
+  multimodality: the response is sensitive to mu and e together, but they trade off).
+
+Verdict per parameter: ``pinned`` (total index >= 0.1 and the matching sets span less than half
+its range), ``not identifiable`` (total index < 0.02: the response ignores it), else ``weak``.
+With fewer than 8 successful simulations or a constant response there is nothing to say, and
+the result says why.
+
+This module computes; it must not run simulations or read stores. Deterministic (fixed seeds).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.stats import qmc
+
+from optimizer.objectives import Evaluation
+from optimizer.space import ParameterSpace
+from optimizer.surrogate import anscombe, fit_gp, length_scales, one_blas_thread
+
+MIN_SIMULATIONS = 8
+PINNED_TOTAL = 0.1
+IGNORED_TOTAL = 0.02
+PINNED_SPREAD = 0.5
+BASE_SAMPLES = 1024  # Saltelli's N: N (d + 2) predictions of the surrogate's mean
+
+
+def sobol_indices(function, n_genes: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """First-order (Saltelli 2010) and total (Jansen 1999) indices of ``function`` on [0, 1]^d."""
+    sample = qmc.Sobol(d=2 * n_genes, scramble=True, seed=seed).random(BASE_SAMPLES)
+    a, b = sample[:, :n_genes], sample[:, n_genes:]
+    f_a, f_b = function(a), function(b)
+    variance = np.var(np.concatenate([f_a, f_b]))
+    if variance <= 0:
+        return np.zeros(n_genes), np.zeros(n_genes)
+    first, total = np.empty(n_genes), np.empty(n_genes)
+    for i in range(n_genes):
+        ab = a.copy()
+        ab[:, i] = b[:, i]
+        f_ab = function(ab)
+        first[i] = np.mean(f_b * (f_ab - f_a)) / variance
+        total[i] = 0.5 * np.mean((f_a - f_ab) ** 2) / variance
+    return np.clip(first, 0.0, 1.0), np.clip(total, 0.0, 1.0)
+
+
+def _verdict(total: float, spread: float | None) -> str:
+    if total < IGNORED_TOTAL:
+        return "not identifiable"
+    if total >= PINNED_TOTAL and (spread is None or spread < PINNED_SPREAD):
+        return "pinned"
+    return "weak"
+
+
+def identifiability(evaluations: Sequence[Evaluation], space: ParameterSpace, tolerance: float) -> dict:
+    """Per free parameter: Sobol indices, length scale, the matching sets' range and a verdict."""
+    rows = [(space.genes(ev.params), n) for ev in evaluations if ev.ok for n in ev.n_remaining]
+    result: dict = {
+        "method": "Sobol indices of a Gaussian-process mean of 2 sqrt(N_t + 3/8) over the search "
+        "box; spread of the matching sets in units of the searched range",
+        "simulations": len(rows),
+        "parameters": [],
+        "reason": "",
+    }
+    if len(rows) < MIN_SIMULATIONS:
+        result["reason"] = f"{len(rows)} successful simulations; at least {MIN_SIMULATIONS} are needed"
+        return result
+    genes = np.array([gene for gene, _ in rows])
+    values = anscombe(np.array([n for _, n in rows]))
+    if np.ptp(values) == 0:
+        result["reason"] = f"every simulation gave N_t = {rows[0][1]}: the response does not vary"
+        return result
+    with one_blas_thread():
+        model = fit_gp(genes, values, random_state=0)
+        first, total = sobol_indices(model.predict, space.n_genes)
+    scales = length_scales(model)
+    matching = np.array([space.genes(ev.params) for ev in evaluations if ev.matches(tolerance)])
+    for i, axis in enumerate(space.axes):
+        spread = low = high = None
+        if len(matching) >= 2:
+            spread = float(np.ptp(matching[:, i]))
+        if len(matching):
+            low, high = axis.value(matching[:, i].min()), axis.value(matching[:, i].max())
+        result["parameters"].append(
+            {
+                "name": axis.name,
+                "first_order": round(float(first[i]), 4),
+                "total": round(float(total[i]), 4),
+                "length_scale": round(float(scales[i]), 4),
+                "matching_sets": int(len(matching)),
+                "matching_range": None if low is None else [low, high],
+                "matching_spread": None if spread is None else round(spread, 4),
+                "verdict": _verdict(float(total[i]), spread),
+            }
+        )
+    return result

@@ -1,0 +1,193 @@
+"""Rounded polyhedra: core distances (GJK) and contact patches against geometry worked by hand,
+cores shrunk exactly, mass properties from the mesh, convex decomposition of non-convex meshes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.optimize import minimize
+
+from dem.convex import contact_patch, gjk_distance, scratch
+from dem.polyhedra import Polyhedron, PolyhedronError, convex_pieces, make_polyhedron, shrink_convex
+from dem.quaternion import from_axis_angle, matrix
+
+I3 = np.eye(3)
+CUBE = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+
+
+def gjk(a, pos_a, b, pos_b, rot_a=I3, rot_b=I3):
+    return gjk_distance(
+        a, 0, len(a), rot_a, np.asarray(pos_a, float), b, 0, len(b), rot_b, np.asarray(pos_b, float)
+    )
+
+
+def test_gjk_distance_of_parallel_faces_is_the_gap():
+    d, *_ = gjk(CUBE, (0, 0, 2.5), CUBE, (0.3, 0.2, 0))
+
+    assert d == pytest.approx(0.5, rel=1e-12)
+
+
+def test_gjk_distance_of_crossed_edges():
+    # A cube turned 45 degrees about x above a cube turned 45 degrees about y: their edges cross
+    # at right angles, each edge sqrt(2) from its centre.
+    rot_a = matrix(from_axis_angle(np.array([1.0, 0, 0]), math.pi / 4))
+    rot_b = matrix(from_axis_angle(np.array([0, 1.0, 0]), math.pi / 4))
+
+    d, ax, ay, az, bx, by, bz = gjk(CUBE, (0, 0, 3), CUBE, (0, 0, 0), rot_a, rot_b)
+
+    assert d == pytest.approx(3 - 2 * math.sqrt(2), rel=1e-12)
+    assert (ax, ay, az) == pytest.approx((0, 0, 3 - math.sqrt(2)), abs=1e-12)
+    assert (bx, by, bz) == pytest.approx((0, 0, math.sqrt(2)), abs=1e-12)
+
+
+def test_gjk_distance_of_corner_to_face():
+    corner_down = matrix(from_axis_angle(np.array([1.0, -1.0, 0]), math.acos(1 / math.sqrt(3))))
+    d, *_ = gjk(CUBE, (0, 0, 4), CUBE, (0, 0, 0), corner_down, I3)
+
+    assert d == pytest.approx(4 - math.sqrt(3) - 1, rel=1e-12)
+
+
+def test_gjk_distance_matches_a_quadratic_program_on_random_hulls():
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        a = rng.normal(size=(rng.integers(1, 10), 3))
+        b = rng.normal(size=(rng.integers(1, 10), 3)) + 5 * rng.normal(size=3)
+        na = len(a)
+
+        def gap(x, a=a, b=b, na=na):
+            diff = x[:na] @ a - x[na:] @ b
+            return diff @ diff
+
+        x0 = np.concatenate([np.full(na, 1 / na), np.full(len(b), 1 / len(b))])
+        best = minimize(
+            gap,
+            x0,
+            method="SLSQP",
+            bounds=[(0, 1)] * len(x0),
+            constraints=[
+                {"type": "eq", "fun": lambda x, na=na: x[:na].sum() - 1},
+                {"type": "eq", "fun": lambda x, na=na: x[na:].sum() - 1},
+            ],
+            options={"ftol": 1e-16, "maxiter": 1000},
+        )
+        d, *_ = gjk(a, (0, 0, 0), b, (0, 0, 0))
+
+        assert d == pytest.approx(math.sqrt(best.fun), rel=1e-6)
+        assert d <= math.sqrt(best.fun) * (1 + 1e-12)
+
+
+def test_gjk_reports_intersecting_hulls_as_distance_zero():
+    d, *_ = gjk(CUBE, (0.5, 0.2, 1.0), CUBE, (0, 0, 0))
+
+    assert d == 0.0
+
+
+def patch(a, pos_a, b, pos_b, rot_a=I3, rot_b=I3):
+    d, ax, ay, az, bx, by, bz = gjk(a, pos_a, b, pos_b, rot_a, rot_b)
+    return contact_patch(
+        a,
+        0,
+        len(a),
+        rot_a,
+        np.asarray(pos_a, float),
+        b,
+        0,
+        len(b),
+        rot_b,
+        np.asarray(pos_b, float),
+        ax,
+        ay,
+        az,
+        bx,
+        by,
+        bz,
+        1e-3,
+        scratch(),
+    )
+
+
+def test_patch_of_offset_parallel_faces_is_the_overlap_rectangle_centroid():
+    load, _, cx, cy, cz, s_uu, s_uw, s_ww = patch(CUBE, (0, 0, 2.5), CUBE, (0.3, 0.2, 0))
+
+    assert load == pytest.approx(1.7 * 1.8 * 1e-3, rel=1e-9)  # area x uniform depth
+    assert (cx, cy, cz) == pytest.approx((0.15, 0.1, 1.25), abs=1e-12)
+    # second moments of the 1.7 x 1.8 rectangle per unit area: side^2 / 12 (axes may be swapped)
+    assert sorted([s_uu, s_ww]) == pytest.approx(sorted([1.7**2 / 12, 1.8**2 / 12]), rel=1e-9)
+    assert s_uw == pytest.approx(0.0, abs=1e-12)
+
+
+def test_patch_of_an_edge_on_a_face_is_the_middle_of_the_edge_part_above_the_face():
+    edge_down = matrix(from_axis_angle(np.array([1.0, 0, 0]), math.pi / 4))
+    area, length, cx, cy, cz, *_ = patch(CUBE, (1.5, 0.0, 3.0), CUBE, (0, 0, 0), edge_down, I3)
+
+    # The lower edge runs along x from 0.5 to 2.5; above the face (x <= 1) it is [0.5, 1].
+    assert area == 0.0
+    assert length == pytest.approx(0.5 * 1e-3, rel=1e-6)  # length x depth
+    assert (cx, cy) == pytest.approx((0.75, 0.0), abs=1e-12)
+    assert cz == pytest.approx(0.5 * (1 + 3 - math.sqrt(2)), abs=1e-12)
+
+
+def test_patch_of_a_corner_on_a_face_is_the_corner():
+    corner_down = matrix(from_axis_angle(np.array([1.0, -1.0, 0]), math.acos(1 / math.sqrt(3))))
+    area, length, cx, cy, cz, *_ = patch(CUBE, (0.2, 0.1, 4), CUBE, (0, 0, 0), corner_down, I3)
+
+    assert area == 0.0
+    assert length == 0.0
+    assert (cx, cy) == pytest.approx((0.2, 0.1), abs=1e-12)
+
+
+def test_shrinking_a_box_moves_every_face_in_by_the_rounding():
+    core = shrink_convex(CUBE * [0.07, 0.035, 0.004], 0.002)
+
+    assert np.sort(np.abs(core), axis=0)[0] == pytest.approx([0.068, 0.033, 0.002], abs=1e-12)
+    assert len(core) == 8
+
+
+def test_a_rounding_thicker_than_the_piece_is_refused():
+    with pytest.raises(PolyhedronError, match="smaller rounding"):
+        shrink_convex(CUBE * [0.07, 0.035, 0.004], 0.004)
+
+
+def test_mass_centre_and_inertia_equal_trimeshs():
+    mesh = trimesh.creation.cylinder(radius=0.02, height=0.01, sections=24)
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(0.4, [1, 2, 3]))
+    mesh.apply_translation([0.1, -0.2, 0.3])
+    density = 1500.0
+
+    poly = make_polyhedron(mesh, density=density)
+
+    reference = trimesh.Trimesh(mesh.vertices, mesh.faces)
+    reference.density = density
+    assert poly.mass == pytest.approx(reference.mass, rel=1e-12)
+    assert poly.com == pytest.approx(reference.center_mass, abs=1e-15)
+    tensor = poly.axes @ np.diag(poly.inertia) @ poly.axes.T
+    assert tensor == pytest.approx(reference.moment_inertia, rel=1e-10, abs=1e-16)
+    # The rounding defaults to a quarter of the thinnest dimension; the core lies r inside.
+    assert poly.rounding == pytest.approx(0.0025, rel=1e-9)
+    depth = trimesh.proximity.signed_distance(mesh, poly.com + poly.core @ poly.axes.T)
+    assert depth.min() == pytest.approx(poly.rounding, rel=1e-6)
+
+
+def test_a_non_convex_mesh_is_decomposed_into_convex_pieces_of_its_volume():
+    # An L made of two boxes (a manifold union): CoACD must split it.
+    a = trimesh.creation.box((0.06, 0.02, 0.02))
+    b = trimesh.creation.box((0.02, 0.06, 0.02))
+    b.apply_translation([0.02, 0.02, 0])
+    mesh = trimesh.boolean.union([a, b], engine="manifold")
+
+    pieces = convex_pieces(mesh)
+
+    assert len(pieces) >= 2
+    assert all(p.is_convex for p in pieces)
+    assert sum(p.volume for p in pieces) == pytest.approx(mesh.volume, rel=0.02)
+
+
+def test_rounded_box_core_and_reach():
+    box = Polyhedron.box((0.04, 0.03, 0.01), 0.002, 1000.0)
+
+    assert box.core.max(axis=0) == pytest.approx([0.018, 0.013, 0.003])
+    assert box.piece_reach(0) == pytest.approx(math.sqrt(0.018**2 + 0.013**2 + 0.003**2) + 0.002)
+    assert box.mass == pytest.approx(1000 * 0.04 * 0.03 * 0.01)

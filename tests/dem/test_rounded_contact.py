@@ -1,0 +1,132 @@
+"""Contact geometry of rounded shapes (dem/rounded_contact.py) against hand-worked cases."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dem.convex import scratch
+from dem.facets import build_facets
+from dem.polyhedra import Polyhedron
+from dem.quaternion import from_axis_angle, matrix
+from dem.rounded_contact import facet_geometry, pair_geometry
+from dem.walls import WallMesh
+
+EYE = np.eye(3)
+BOX = Polyhedron.box((0.04, 0.03, 0.01), 0.002, 1000.0)
+
+
+def floor():
+    """A 1 m square floor: one facet of two triangles meeting along the diagonal."""
+    facets = build_facets([WallMesh.plane((0, 0, 0), (0, 0, 1), 1.0)])
+    assert facets.tri_count[0] == 2
+    return facets
+
+
+def on_floor(rot, pos):
+    f = floor()
+    return facet_geometry(
+        BOX.core,
+        0,
+        8,
+        rot,
+        np.asarray(pos, float),
+        BOX.rounding,
+        f.tri.reshape(-1, 3),
+        0,
+        2,
+        np.zeros(3),
+        f.normal[0],
+        f.offset[0],
+        EYE,
+        scratch(),
+    )
+
+
+def test_a_box_lying_across_the_facet_diagonal_is_one_contact_below_its_centre():
+    # The floor's diagonal runs through the origin; the box's face straddles it.
+    delta, d, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face = on_floor(EYE, (0.004, -0.003, 0.0049))
+
+    assert delta == pytest.approx(0.0001, rel=1e-9)
+    assert d == pytest.approx(0.0049 - 0.003, rel=1e-12)
+    assert (nx, ny, nz) == pytest.approx((0, 0, 1), abs=1e-9)
+    assert (cx, cy) == pytest.approx((0.004, -0.003), abs=1e-9)
+    assert cz == pytest.approx(0.5 * (0.0049 - 0.003), abs=1e-12)
+    assert is_face
+    # the patch is the core's 36 x 26 mm face: second moments side^2 / 12 per unit area
+    assert sorted([s_uu, s_ww]) == pytest.approx(sorted([0.036**2 / 12, 0.026**2 / 12]), rel=1e-6)
+
+
+def test_a_slightly_tilted_face_is_pressed_at_its_winkler_centre_of_pressure():
+    # Depth falls linearly from 1e-4 m at x = -a to 0.5e-4 m at x = +a (a tilt about y): the centre
+    # of a linear pressure over [-a, a] is a^2 theta / (3 depth_centre) from the middle, towards -a.
+    a, deep, shallow = 0.018, 1e-4, 0.5e-4
+    theta = (deep - shallow) / (2 * a)
+    rot = matrix(from_axis_angle(np.array([0, 1.0, 0]), -theta))
+    lowest = float(np.min((BOX.core @ rot.T)[:, 2]))
+    delta, d, nx, ny, nz, cx, cy, cz, *_ = on_floor(rot, (0.0, 0.0, BOX.rounding - deep - lowest))
+
+    assert delta == pytest.approx(deep, rel=1e-9)
+    middle = float(np.mean((BOX.core @ rot.T)[:, 0]))
+    assert cx - middle == pytest.approx(-a * a * theta / (3 * 0.5 * (deep + shallow)), rel=5e-3)
+
+
+def test_a_box_standing_on_an_edge_touches_at_the_middle_of_the_edge():
+    rot = matrix(from_axis_angle(np.array([1.0, 0, 0]), math.radians(30)))
+    lowest = float(np.min((BOX.core @ rot.T)[:, 2]))
+    delta, d, nx, ny, nz, cx, cy, cz, *_ = on_floor(rot, (0.01, 0.02, -lowest + 0.0015))
+
+    assert delta == pytest.approx(0.0005, rel=1e-9)
+    edge = (BOX.core @ rot.T)[np.isclose((BOX.core @ rot.T)[:, 2], lowest)]
+    assert len(edge) == 2
+    assert (cx, cy) == pytest.approx(tuple(edge.mean(axis=0)[:2] + [0.01, 0.02]), abs=1e-12)
+
+
+def test_a_box_above_the_facet_plane_is_rejected_before_gjk():
+    delta, *_ = on_floor(EYE, (0, 0, 0.02))
+
+    assert delta < 0
+
+
+def pair(pos_a, rot_a, pos_b, rot_b, axis):
+    return pair_geometry(
+        BOX.core,
+        0,
+        8,
+        rot_a,
+        np.asarray(pos_a, float),
+        BOX.rounding,
+        BOX.core,
+        0,
+        8,
+        rot_b,
+        np.asarray(pos_b, float),
+        BOX.rounding,
+        axis,
+        scratch(),
+    )
+
+
+def test_stacked_boxes_touch_at_the_centre_of_their_overlapping_faces():
+    axis = np.zeros(3)
+    delta, d, nx, ny, nz, cx, cy, cz, *_ = pair((0.01, 0.0, 0.0099), EYE, (0, 0, 0), EYE, axis)
+
+    assert delta == pytest.approx(0.0001, rel=1e-9)
+    assert (nx, ny, nz) == pytest.approx((0, 0, 1), abs=1e-9)
+    # Overlap of the faces: x in [-0.008, 0.018] and [-0.018, 0.008]: [-0.008, 0.008].
+    assert (cx, cy, cz) == pytest.approx((0.005, 0.0, 0.00495), abs=1e-12)
+    assert axis == pytest.approx([0, 0, 1])
+
+
+def test_the_cached_separating_axis_gives_the_gjk_answer_for_pairs_apart():
+    rot = matrix(from_axis_angle(np.array([1.0, 2.0, 3.0]), 0.7))
+    axis = np.zeros(3)
+    near = pair((0.0, 0.0, 0.03), rot, (0, 0, 0), EYE, axis)
+    far_cached = pair((0.0, 0.0, 0.2), rot, (0, 0, 0), EYE, axis)
+    far_fresh = pair((0.0, 0.0, 0.2), rot, (0, 0, 0), EYE, np.zeros(3))
+
+    assert near[0] < 0 and far_cached[0] < 0
+    # The gap along any direction is at most the distance: the cached test never misses a contact.
+    assert far_fresh[0] - 1e-15 <= far_cached[0] < 0

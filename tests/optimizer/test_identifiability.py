@@ -1,0 +1,62 @@
+"""Identifiability: Sobol indices against an analytic case, and verdicts on a synthetic study
+whose response ignores nu."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optimizer.identifiability import identifiability, sobol_indices
+from optimizer.objectives import Evaluation
+from optimizer.space import ParameterSpace
+from optimizer.study import Parameters
+
+
+def test_sobol_indices_of_a_linear_function_are_its_variance_shares():
+    # f = x0 + 2 x1 with x uniform: Var = 1/12 + 4/12, so S0 = 0.2, S1 = 0.8, x2 has none.
+    first, total = sobol_indices(lambda x: x[:, 0] + 2.0 * x[:, 1], n_genes=3)
+
+    assert first == pytest.approx([0.2, 0.8, 0.0], abs=0.02)
+    assert total == pytest.approx([0.2, 0.8, 0.0], abs=0.02)
+
+
+def test_sobol_total_index_sees_an_interaction_the_first_order_misses():
+    # f = (x0 - 1/2)(x1 - 1/2): no main effects, all variance in the interaction.
+    first, total = sobol_indices(lambda x: (x[:, 0] - 0.5) * (x[:, 1] - 0.5), n_genes=2)
+
+    assert first == pytest.approx([0.0, 0.0], abs=0.05)
+    assert total == pytest.approx([1.0, 1.0], abs=0.05)
+
+
+def synthetic_study(n: int = 60):
+    space = ParameterSpace(Parameters())
+    rng = np.random.default_rng(0)
+    evaluations = []
+    for individual, genes in enumerate(rng.random((n, 4))):
+        n_t = int(round(30 / (1 + np.exp(-10 * (genes[3] - 0.6) + 4 * (genes[2] - 0.5)))))
+        evaluations.append(Evaluation(individual, 0, space.params(genes), abs(n_t - 4), 1.0, [n_t], 1.0, 1.0))
+    return evaluations, space
+
+
+def test_a_parameter_the_response_ignores_is_not_identifiable():
+    evaluations, space = synthetic_study()
+
+    result = identifiability(evaluations, space, tolerance=0.5)
+
+    by_name = {row["name"]: row for row in result["parameters"]}
+    assert by_name["nu"]["verdict"] == "not identifiable"
+    assert by_name["E"]["verdict"] == "not identifiable"
+    assert by_name["mu"]["total"] > by_name["e"]["total"] > 0.02
+    assert by_name["mu"]["total"] > 0.5
+    assert result["simulations"] == 60 and result["reason"] == ""
+
+
+def test_too_few_or_constant_simulations_say_why():
+    evaluations, space = synthetic_study(5)
+    assert "at least 8" in identifiability(evaluations, space, 0.5)["reason"]
+
+    flat = [
+        Evaluation(i, 0, ev.params, 4.0, 1.0, [0], 1.0, 1.0) for i, ev in enumerate(synthetic_study(10)[0])
+    ]
+    result = identifiability(flat, space, 0.5)
+    assert "does not vary" in result["reason"] and result["parameters"] == []
