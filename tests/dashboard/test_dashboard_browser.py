@@ -33,6 +33,7 @@ def open_study(page, dashboard):
     page.goto(dashboard.url(f"/studies/{dashboard.study.study_id}"))
     page.wait_for_function(PLOTTED, arg="pareto-plot")
     page.wait_for_function(PLOTTED, arg="generation-plot")
+    page.wait_for_function(PLOTTED, arg="parameter-plot")
 
 
 def test_studies_page_lists_the_study_with_progress_and_status(page, dashboard):

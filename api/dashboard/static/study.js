@@ -115,6 +115,8 @@ async function renderPlots() {
   Plotly.react("generation-plot", gen.data, gen.layout, CONFIG);
   const par = parameterFigure(searched, study.definition?.parameters || {}, gmax);
   Plotly.react("parameter-plot", par.data, par.layout, CONFIG);
+  // A point can be clicked as soon as it is drawn, not only once the slower tables have loaded.
+  bindClicks();
   // For benchmarks/dashboard_render.py: the first moment every plot of the study is drawn.
   if (!performance.getEntriesByName("demcal:plots-drawn").length) performance.mark("demcal:plots-drawn");
 }
@@ -319,11 +321,7 @@ async function start() {
     showBanner("Paste an API key (from `demcal apikey create`) in the box above to see this study.", "warn");
     return;
   }
-  poll(async () => {
-    const goOn = await refresh();
-    if (trials.size) bindClicks();
-    return goOn;
-  }, POLL_MS);
+  poll(refresh, POLL_MS);
 }
 
 start().catch((error) => {
