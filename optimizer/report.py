@@ -61,11 +61,38 @@ CSV_COLUMNS = (
 )
 
 
-def first_match(evaluations: list[Evaluation], tolerance: float, replicates: int) -> int | None:
-    """Simulations run until an individual first matched, counting individuals in creation order."""
-    for evaluation in sorted(evaluations, key=lambda ev: ev.individual):
-        if evaluation.matches(tolerance):
-            return (evaluation.individual + 1) * replicates
+def first_match(records: list[TrialRecord], definition: StudyDefinition) -> int | None:
+    """Simulations run until a set first matched the experiment, or None.
+
+    Runs are counted in the order the driver creates them: batch by batch, and within a batch by
+    individual and replicate. A set counts as matching on the runs it had at that point, so the
+    extra replicates of earlier batches are part of the count, and a set whose match needed its
+    extra replicates matches only once they ran (not at its first batch, on runs it did not
+    have yet). Validation runs never count: they come after the search.
+    """
+    validation = definition.validation_batch()
+    runs = sorted(
+        (r for r in records if r.result is not None and r.spec.generation < validation),
+        key=lambda r: (r.spec.generation, r.spec.individual, r.spec.replicate),
+    )
+    tolerance, n_items = definition.match_tolerance(), definition.n_items()
+    unfinished = {  # sets whose first runs are still out: not evaluated yet, as in evaluate()
+        r.spec.individual for r in records if r.result is None and r.spec.replicate < definition.replicates
+    }
+    so_far: dict[int, list[TrialRecord]] = {}
+    for count, record in enumerate(runs, start=1):
+        so_far.setdefault(record.spec.individual, []).append(record)
+        following = runs[count] if count < len(runs) else None
+        if following is not None and (following.spec.generation, following.spec.individual) == (
+            record.spec.generation,
+            record.spec.individual,
+        ):
+            continue  # the set's runs of this batch are not all counted yet
+        if record.spec.individual in unfinished:
+            continue
+        evaluation = evaluate(so_far[record.spec.individual], definition, n_items)
+        if evaluation and evaluation[0].matches(tolerance):
+            return count
     return None
 
 
@@ -142,9 +169,7 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         "algorithm": definition.ga.algorithm,
         "simulations": sum(record.result is not None for record in records),
         "simulations_planned": definition.total_simulations(),
-        "simulations_until_first_match": first_match(
-            evaluations, definition.match_tolerance(), definition.replicates
-        ),
+        "simulations_until_first_match": first_match(records, definition),
         "best_f1": ranking.best_f1,
         "failures": failures_json(records),
         # The stored recommendation is the driver's: after the validation, the fastest validated set.
@@ -347,7 +372,5 @@ def write_results(directory: Path, study: StudyRecord, records: list[TrialRecord
     (directory / "summary.json").write_text(json.dumps(summary_json, indent=2))
     write_trials_csv(directory / "trials.csv", definition, records)
     evaluations = evaluate(records, definition, definition.n_items())
-    write_pareto_png(
-        directory / "pareto.png", summary_json, evaluations, records, definition.ga.generations
-    )
+    write_pareto_png(directory / "pareto.png", summary_json, evaluations, records, definition.ga.generations)
     return summary_json

@@ -9,7 +9,9 @@ from collections import Counter
 
 from optimizer.driver import Driver
 from optimizer.memory import MemoryStore, SyntheticExecutor, synthetic_result, synthetic_with_failures
-from optimizer.report import write_results
+from optimizer.protocols import TrialRecord, TrialSpec, TrialState
+from optimizer.report import first_match, write_results
+from tests.optimizer.conftest import PAPER_MEASURED, make_definition
 
 TARGET = 4  # the paper's median 3.5, rounded half up
 
@@ -90,3 +92,50 @@ def test_failed_runs_are_counted_by_status_and_never_shown_as_n_t(tmp_path, smal
         ok = [r.result.n_remaining for r in generation if r.result.ok]
         assert entry["n_remaining"] == {"median": statistics.median(ok), "min": min(ok), "max": max(ok)}
     assert all(not member["failure"] for member in summary["pareto"])
+
+
+def _record(individual: int, batch: int, replicate: int, n_remaining: int) -> TrialRecord:
+    params = {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.1 * (individual + 1)}
+    spec = TrialSpec(
+        f"s-i{individual:05d}-r{replicate:02d}",
+        "s",
+        individual,
+        batch,
+        replicate,
+        1000 + replicate,
+        params,
+        {},
+    )
+    result = synthetic_result(spec).model_copy(
+        update={"n_remaining": n_remaining, "responses": {"n_remaining": n_remaining}}
+    )
+    return TrialRecord(spec, TrialState.DONE, result)
+
+
+def test_first_match_counts_the_extra_replicates_run_before_it():
+    """Batch 0: sets 0-7, two runs each, none matching; set 0 ([4, 12], median 8) is near enough
+    to earn a third run. Batch 1: set 0's third run (now [4, 12, 4], median 4: a match) and sets
+    8-11. Runs until the first match: 16 of batch 0, then set 0's extra run = 17; a count by
+    individual x replicates would say 2 (set 0 before its extra run existed)."""
+    definition = make_definition(
+        replicates=2, max_replicates=3, experiment={"measured": PAPER_MEASURED, "distance": "aggregate"}
+    )
+    records = [_record(0, 0, 0, TARGET), _record(0, 0, 1, TARGET + 8)]
+    records += [_record(i, 0, r, TARGET + 8) for i in range(1, 8) for r in range(2)]
+    records += [_record(0, 1, 2, TARGET)]
+    records += [_record(i, 1, r, TARGET + 8) for i in range(8, 12) for r in range(2)]
+
+    assert first_match(records, definition) == 17
+    assert first_match(records[:16], definition) is None
+
+
+def test_first_match_counts_every_earlier_extra_replicate():
+    """Set 9 matches in batch 1, after 16 runs of batch 0, set 0's extra run and set 8's two."""
+    definition = make_definition(
+        replicates=2, max_replicates=3, experiment={"measured": PAPER_MEASURED, "distance": "aggregate"}
+    )
+    records = [_record(i, 0, r, TARGET + 8) for i in range(8) for r in range(2)]
+    records += [_record(0, 1, 2, TARGET + 8)]
+    records += [_record(i, 1, r, TARGET if i == 9 else TARGET + 8) for i in range(8, 12) for r in range(2)]
+
+    assert first_match(records, definition) == 16 + 1 + 2 + 2
