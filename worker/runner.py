@@ -20,11 +20,15 @@
 * Shutdown: the first SIGTERM or SIGINT is a *warm* shutdown: the worker takes no new job, lets
   the running trial finish and deliver its result, then exits 0. A trial can take minutes, so a
   supervisor must wait that long before it sends SIGKILL (compose: ``stop_grace_period``). A
-  second signal is a cold shutdown: the running trial is killed and the service re-runs it.
+  second signal is a cold shutdown: the running trial is killed, the service re-runs it, and
+  the worker exits ``COLD_STOP_EXIT_CODE`` (non-zero: a supervisor learns a trial was abandoned).
   RQ stops the trial by raising ``SystemExit`` from the signal handler, wherever the trial is;
-  a library that swallows it (trimesh imports its optional parts under ``except BaseException``,
-  and a trial's first clump imports them) would let the trial run on, so the process also ends
-  itself ``COLD_STOP_GRACE_S`` after a cold shutdown that has not unwound by then.
+  RQ's ``perform_job`` itself catches it (a bare ``except``: the job is failed, and retried) and
+  then leaves its loop normally, so the worker remembers the cold stop (``cold_stopped``) to
+  exit with the right code. A library that swallows the ``SystemExit`` (trimesh imports its
+  optional parts under ``except BaseException``, and a trial's first clump imports them) would
+  let the trial run on, so the process also ends itself, with the same code,
+  ``COLD_STOP_GRACE_S`` after a cold shutdown that has not unwound by then.
 * The job's argument carries the whole trial, so workers need only Redis: no database URL.
 
 Must not: open the database or drive studies; that is ``demcal serve``'s job.
@@ -55,16 +59,22 @@ DEFAULT_HEARTBEAT_S = 10
 # A cold shutdown unwinds in milliseconds (RQ marks the job failed, then the worker exits); past
 # this, the SystemExit was swallowed and the process ends without further ado.
 COLD_STOP_GRACE_S = 2.0
+COLD_STOP_EXIT_CODE = 1
 
 
 class WorkerSetupError(RuntimeError):
     """The worker cannot start (no Redis URL, Redis unreachable); the message says what to fix."""
 
 
+class ColdStop(RuntimeError):
+    """A second SIGTERM/SIGINT stopped the worker mid-trial; the trial was abandoned (and re-queued)."""
+
+
 class DemcalWorker(SimpleWorker):
     """RQ's in-process worker, with heartbeats while a job runs and a short heartbeat grace."""
 
     stop_asked = False  # a SIGTERM/SIGINT arrived: the end of the work is wanted, not an outage
+    cold_stopped = False  # a second signal abandoned the running trial
 
     def request_stop(self, signum, frame) -> None:
         self.stop_asked = True
@@ -77,6 +87,7 @@ class DemcalWorker(SimpleWorker):
         try:
             super().request_force_stop(signum, frame)  # raises SystemExit unless a duplicate signal
         except SystemExit:
+            self.cold_stopped = True
             backstop = threading.Timer(COLD_STOP_GRACE_S, _exit_now, args=(self.name,))
             backstop.daemon = True
             backstop.start()
@@ -105,7 +116,7 @@ class DemcalWorker(SimpleWorker):
 def _exit_now(name: str) -> None:
     logger.warning("worker %s: cold shutdown not unwound after %g s; exiting now", name, COLD_STOP_GRACE_S)
     logging.shutdown()
-    os._exit(1)
+    os._exit(COLD_STOP_EXIT_CODE)
 
 
 def worker_name() -> str:
@@ -169,7 +180,7 @@ def run_worker(
 ) -> bool:
     """Work until told to stop (or, with ``burst``, until the queues are empty).
 
-    Returns True if at least one job was performed.
+    Returns True if at least one job was performed; raises ``ColdStop`` after a cold shutdown.
     """
     from worker import rq_job
 
@@ -195,6 +206,8 @@ def run_worker(
             worked = worker.work(burst=burst, logging_level=log_level, with_scheduler=False) or worked
         except REDIS_OUTAGE as exc:  # raised from RQ's own start-up or tear-down
             logger.warning("worker %s: Redis unavailable (%s)", worker.name, exc)
+        if worker.cold_stopped:
+            raise ColdStop(f"worker {worker.name}: cold shutdown; its running trial was abandoned")
         if burst or worker.stop_asked:
             logger.info("worker %s: stopped", worker.name)
             return worked

@@ -30,11 +30,12 @@ def register(app: typer.Typer) -> None:
             "is presumed dead and its trial runs again elsewhere.",
         ),
     ) -> None:
-        """Run trials from the queue. SIGTERM finishes the current trial, then exits."""
+        """Run trials from the queue. SIGTERM finishes the current trial, then exits 0; a second
+        SIGTERM abandons it (the service runs it again) and exits 1."""
         from api.settings import get_settings
         from dem.engines.base import available_engines
         from worker.rq_executor import engine_queues
-        from worker.runner import WorkerSetupError, run_worker
+        from worker.runner import COLD_STOP_EXIT_CODE, ColdStop, WorkerSetupError, run_worker
 
         settings = get_settings()
         engines = available_engines()
@@ -52,3 +53,6 @@ def register(app: typer.Typer) -> None:
         except WorkerSetupError as exc:
             typer.secho(f"error: {exc}", err=True, fg="red")
             raise typer.Exit(2) from None
+        except ColdStop as exc:
+            typer.secho(f"stopped: {exc}", err=True, fg="yellow")
+            raise typer.Exit(COLD_STOP_EXIT_CODE) from None

@@ -221,11 +221,6 @@ def test_a_worker_stopped_with_sigterm_finishes_its_trial_first(cluster):
     assert cluster.worker_busy("w1") is None
 
 
-@pytest.mark.xfail(
-    reason="open: fails on main since the worker warm-up and the cold-stop grace landed together; "
-    "not yet diagnosed (closing note, issue 17)",
-    strict=False,
-)
 def test_a_second_sigterm_stops_the_worker_at_once_and_the_trial_runs_elsewhere(cluster):
     # Trials of 10 simulated seconds: longer than the two signals take (about 2 s) even on a
     # fast machine, so the second one reaches a trial still running.
