@@ -104,6 +104,18 @@ def _wasserstein(experiment: Experiment, n: int) -> bool:
     return experiment.distance == "wasserstein" or (experiment.distance == "auto" and n >= 3)
 
 
+def f1_rule(definition: StudyDefinition) -> str:
+    """f1 in words, as the study defines it (for titles and axis labels): what the views print
+    must be the formula the search used, W1 or the aggregate, never a guess."""
+    if len(definition.experiments) > 1:
+        names = ", ".join(experiment.response for experiment in definition.experiments)
+        return f"max over experiments ({names}) of distance / tolerance"
+    experiment = definition.experiment
+    if _wasserstein(experiment, definition.replicates):
+        return f"W1({experiment.response} of the replicates, {len(experiment.measured)} measured values)"
+    return f"|{experiment.aggregate}({experiment.response}) - {experiment.target():g}|"
+
+
 def match_interval(
     values: dict[str, Sequence[float]], definition: StudyDefinition, seed: int
 ) -> tuple[float, float]:

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from optimizer.identifiability import identifiability
-from optimizer.objectives import Evaluation, evaluate
+from optimizer.objectives import Evaluation, evaluate, f1_rule
 from optimizer.outcomes import (
     count_failures,
     failure_status,
@@ -164,6 +164,7 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         "response": experiment.response,
         "target": experiment.target(),
         "tolerance": definition.match_tolerance(),
+        "f1_rule": f1_rule(definition),
         "measured": experiment.measured,
         "objective_time": definition.objective_time,
         "algorithm": definition.ga.algorithm,
@@ -293,7 +294,7 @@ def write_pareto_png(
         left.scatter([chosen["f2"]], [chosen["f1"]], marker="*", s=250, color="tab:red", label="recommended")
     left.set_xlabel("f2: " + ("wall time T, s" if wall else "cost"))
     response = summary_json.get("response") or "n_remaining"
-    left.set_ylabel(f"f1: |{response} - target|")
+    left.set_ylabel(f"f1 = {summary_json['f1_rule']}", fontsize=8)
     left.legend(loc="best", fontsize=8)
 
     statuses = list(summary_json["failures"]["by_status"])

@@ -249,8 +249,7 @@ def _report(console, store, study_id: str, results: Path) -> None:
 
     experiments = study.definition.get("experiments") or [study.definition.get("experiment") or {}]
     response = experiments[0].get("response") or "n_remaining"
-    rule = f"|{response} - {summary['target']:g}|" if len(experiments) == 1 else "max |x - target| / tol"
-    table = Table(title=f"Pareto front of {study_id} (f1 = {rule})")
+    table = Table(title=f"Pareto front of {study_id} (f1 = {summary['f1_rule']})")
     for column in (
         "individual",
         "gen",

@@ -206,3 +206,36 @@ def test_validation_seeds_beyond_the_budget_exit_2_saying_what_fits(embedded, tm
 
     assert result.exit_code == 2
     assert "validation.seeds <= 5" in result.output
+
+
+@pytest.mark.parametrize(
+    ("overrides", "rule"),
+    [
+        ({"replicates": 3}, "f1 = W1(n_remaining of the replicates, 10 measured values)"),
+        ({"replicates": 1}, "f1 = |median(n_remaining) - 4|"),
+    ],
+)
+def test_the_pareto_table_title_gives_the_study_s_own_f1(tmp_path, overrides, rule):
+    """With 3 replicates f1 is the Wasserstein-1 distance: a title saying |N_t - target| would
+    describe a different objective from the one the table ranks by."""
+    from rich.console import Console
+
+    from api.commands.calibrate import _report
+    from optimizer.driver import Driver
+    from optimizer.memory import MemoryStore, SyntheticExecutor, synthetic_result
+    from tests.optimizer.conftest import make_definition
+
+    definition = make_definition(
+        ga={"population": 4, "offspring": 2, "generations": 1}, validation={"seeds": 0}, **overrides
+    )
+    store = MemoryStore()
+    study_id = store.create_study(definition.model_dump(mode="json"))
+    Driver(store, SyntheticExecutor(synthetic_result)).run_to_completion(study_id, poll_timeout=0)
+    console = Console(record=True, width=200)
+
+    _report(console, store, study_id, tmp_path)
+
+    cli = console.export_text()
+    assert f"Pareto front of {study_id} ({rule})" in cli
+    summary = json.loads(next(tmp_path.glob("*/summary.json")).read_text())
+    assert summary["f1_rule"] == rule.removeprefix("f1 = ")
