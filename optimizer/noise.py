@@ -32,6 +32,36 @@ def wasserstein_many(samples: np.ndarray, reference: Sequence[float]) -> np.ndar
     return np.abs(cdf_samples - cdf_reference[None, :]) @ widths
 
 
+def wasserstein_pairs(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """W1 between row i of ``first`` (r x n) and row i of ``second`` (r x m), as a length-r array."""
+    first, second = np.atleast_2d(first).astype(float), np.atleast_2d(second).astype(float)
+    support = np.union1d(np.unique(first), np.unique(second))
+    if len(support) < 2:
+        return np.zeros(len(first))
+    points = support[:-1]
+    cdf_first = (first[:, :, None] <= points[None, None, :]).mean(axis=1)
+    cdf_second = (second[:, :, None] <= points[None, None, :]).mean(axis=1)
+    return np.abs(cdf_first - cdf_second) @ np.diff(support)
+
+
+def permutation_quantile(
+    sample: Sequence[float],
+    reference: Sequence[float],
+    statistic: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    quantile: float,
+    seed: int = 0,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+) -> float:
+    """The ``quantile`` of ``statistic`` (row-wise, of an r x n and an r x m array) over random
+    splits of the pooled values into groups of the sizes of ``sample`` and ``reference``: what
+    the statistic does when both are draws of one distribution (a permutation test)."""
+    pool = np.concatenate([np.asarray(sample, dtype=float), np.asarray(reference, dtype=float)])
+    rng = np.random.default_rng(seed)
+    shuffled = pool[np.argsort(rng.random((resamples, len(pool))), axis=1)]
+    stats = statistic(shuffled[:, : len(sample)], shuffled[:, len(sample) :])
+    return float(np.quantile(stats, quantile))
+
+
 def median_many(samples: np.ndarray) -> np.ndarray:
     return np.median(np.atleast_2d(np.asarray(samples, dtype=float)), axis=1)
 
