@@ -139,3 +139,17 @@ def test_bad_toml_definition_is_422_saying_what_to_fix(http, dashboard, toml, ex
 
     assert response.status_code == 422
     assert expected in response.json()["detail"]
+
+
+def test_the_new_study_starter_is_the_readme_quick_study():
+    """The form's starter is examples/study-quick.toml, a calibration that matches and validates
+    (the former starter put 9 of 20 runs in the invalid region and matched nothing)."""
+    import tomllib
+
+    from optimizer.study import load_study_file, parse_study
+
+    root = Path(__file__).resolve().parents[2]
+    source = (root / "api/dashboard/static/new.js").read_text()
+    starter = re.search(r"const STARTER = `(.*?)`;", source, re.S).group(1)
+
+    assert parse_study(tomllib.loads(starter)) == load_study_file(root / "examples/study-quick.toml")
