@@ -305,9 +305,13 @@ def build_executor(settings: Settings) -> Any:
         from worker.rq_executor import RqExecutor
 
         return RqExecutor.from_url(settings.redis_url, settings.queue_name)
+    from dem.scenarios.paths import mesh_root
     from worker.local import LocalPoolExecutor
 
-    return LocalPoolExecutor(workers=settings.workers, snapshot_root=settings.data_dir / "snapshots")
+    return LocalPoolExecutor(
+        workers=settings.workers, snapshot_root=settings.data_dir / "snapshots",
+        mesh_root=mesh_root(settings.data_dir),
+    )
 
 
 def build_driver_loop(settings: Settings, store: SqlStore, **options: Any) -> DriverLoop:

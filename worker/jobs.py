@@ -31,11 +31,14 @@ def run_trial(
     should_stop: Callable[[], bool] | None = None,
     progress: Callable[[float, int], None] | None = None,
     snapshot_root: Path | None = None,
+    mesh_root: Path | None = None,
 ) -> dict[str, Any]:
     """Run one simulation for ``spec``; returns ``SimulationResult.model_dump(mode="json")``.
 
     With ``spec["keep_snapshots"]`` and a ``snapshot_root`` (the worker's data dir), the run's
     snapshots go to ``snapshot_root/<trial id>/``, where the dashboard's replay reads them.
+    Relative mesh paths in the scenario are this process's files in ``mesh_root``
+    (``dem/scenarios/paths.py``).
     """
     started = time.monotonic()
     params = spec.get("params") or {}
@@ -43,9 +46,11 @@ def run_trial(
     try:
         from dem.engines.base import DEFAULT_ENGINE, run_scenario
         from dem.scenarios.base import RunControl
+        from dem.scenarios.paths import resolve_paths
         from dem.scenarios.registry import for_config
 
-        scenario = for_config(spec["scenario"])
+        config = resolve_paths(spec["scenario"], mesh_root)
+        scenario = for_config(config)
         timeout_s = spec.get("timeout_s")
         control = RunControl(
             deadline=started + float(timeout_s) if timeout_s else None,
@@ -56,7 +61,7 @@ def run_trial(
             control.snapshot_dir = Path(snapshot_root) / str(spec["trial_id"])
         result = run_scenario(
             scenario,
-            spec["scenario"],
+            config,
             dict(params),
             int(seed),
             control,

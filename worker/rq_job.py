@@ -141,9 +141,11 @@ def attempt(job: Job) -> int:
     return retries - left + 1
 
 
-# Where this worker process keeps snapshots of trials that ask for them (set by ``run_worker``
-# from the worker's data dir; None keeps none).
+# Where this worker process keeps snapshots of trials that ask for them, and where it finds the
+# meshes a scenario names (set by ``run_worker`` from the worker's data dir; None: none kept, and
+# relative mesh paths are taken from the working directory).
 SNAPSHOT_ROOT: Path | None = None
+MESH_ROOT: Path | None = None
 
 
 def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
@@ -173,6 +175,7 @@ def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
         should_stop=CancellationCheck(job, spec["trial_id"]),
         progress=ProgressLog(spec["trial_id"], end),
         snapshot_root=SNAPSHOT_ROOT,
+        mesh_root=MESH_ROOT,
     )
     deliver(job, spec, result)
     logger.info(

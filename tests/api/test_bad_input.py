@@ -86,14 +86,18 @@ def test_a_scenario_naming_a_server_path_is_422_before_anything_is_opened(client
         assert "mesh directory" in response.json()["detail"]
 
 
-def test_a_mesh_inside_the_servers_mesh_directory_is_accepted_as_an_absolute_path(client, keys, settings):
-    scenario = {"tray": {"mesh_file": "trays/t1.stl"}}
+def test_a_mesh_inside_the_mesh_directory_is_stored_relative_to_it(client, keys, settings):
+    # Each worker resolves it against its own mesh directory: no path of the server's travels.
+    inside = str((settings.data_dir / "meshes" / "trays" / "t1.stl").resolve())
+    for given in ("trays/t1.stl", "trays/../trays/./t1.stl", inside):
+        scenario = {"tray": {"mesh_file": given}}
 
-    response = client.post("/api/v1/studies", json=study_definition(scenario=scenario), headers=keys.auth())
+        response = client.post(
+            "/api/v1/studies", json=study_definition(scenario=scenario), headers=keys.auth()
+        )
 
-    assert response.status_code == 201, response.text
-    stored = response.json()["definition"]["scenario"]["tray"]["mesh_file"]
-    assert stored == str((settings.data_dir / "meshes" / "trays" / "t1.stl").resolve())
+        assert response.status_code == 201, response.text
+        assert response.json()["definition"]["scenario"]["tray"]["mesh_file"] == "trays/t1.stl"
 
 
 def test_simulate_with_an_unphysical_set_exits_2_with_one_line():

@@ -166,8 +166,10 @@ class Cluster:
         wait_for(lambda: self._healthy(port or self.port), 60, f"{name} to answer /healthz")
         return process
 
-    def start_worker(self, name: str, cwd: Path | None = None) -> subprocess.Popen:
-        return self.start(name, "worker", "--name", name, "--heartbeat", "1", cwd=cwd)
+    def start_worker(self, name: str, data_dir: Path | None = None) -> subprocess.Popen:
+        """``demcal worker``; ``data_dir`` gives it a data directory of its own (another machine's)."""
+        env = {"DEMCAL_DATA_DIR": str(data_dir)} if data_dir else None
+        return self.start(name, "worker", "--name", name, "--heartbeat", "1", env=env)
 
     def _healthy(self, port: int) -> bool:
         try:

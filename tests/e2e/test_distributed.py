@@ -166,23 +166,19 @@ def test_a_flushed_redis_mid_generation_loses_no_trial(cluster):
     assert_every_trial_has_exactly_one_result(cluster, study_id)
 
 
-@pytest.mark.xfail(
-    reason="open: since scenario paths are confined to $DEMCAL_DATA_DIR/meshes (issue 14 item 4) the "
-    "relative tray.stl resolves into the server's data dir, so the per-worker cwd premise is gone",
-    strict=False,
-)
 def test_a_worker_whose_simulation_fails_reports_an_error_trial_and_the_study_goes_on(cluster, tmp_path):
-    # The study's tray is a user mesh given by a relative path: present where w-with-mesh runs,
-    # missing where w-without-mesh runs (a machine nobody copied the file to).
+    # The study's tray is a mesh in the mesh directory: each worker reads it from its own data dir,
+    # where w-with-mesh has it and w-without-mesh does not (a machine nobody copied the file to).
+    # The server's data dir has none either: it only checks the path, a worker opens the file.
     with_mesh, without_mesh = tmp_path / "with-mesh", tmp_path / "without-mesh"
-    with_mesh.mkdir()
+    (with_mesh / "meshes" / "trays").mkdir(parents=True)
     without_mesh.mkdir()
     vertices, faces = parametric_tray_mesh(TrayConfig())
-    trimesh.Trimesh(vertices, faces, process=False).export(with_mesh / "tray.stl")
+    trimesh.Trimesh(vertices, faces, process=False).export(with_mesh / "meshes" / "trays" / "tray.stl")
     definition = tiny_study("missing-mesh")
-    definition["scenario"]["tray"] = {**definition["scenario"].get("tray", {}), "mesh_file": "tray.stl"}
+    definition["scenario"]["tray"] = {**definition["scenario"].get("tray", {}), "mesh_file": "trays/tray.stl"}
     cluster.start_serve()
-    cluster.start_worker("w-without-mesh", cwd=without_mesh)
+    cluster.start_worker("w-without-mesh", data_dir=without_mesh)
     study_id = cluster.create_study(definition)
     wait_for(
         lambda: any(trial["status"] == "error" for trial in cluster.trials(study_id)),
@@ -190,14 +186,18 @@ def test_a_worker_whose_simulation_fails_reports_an_error_trial_and_the_study_go
         "the worker without the mesh to report an error",
     )
 
-    cluster.start_worker("w-with-mesh", cwd=with_mesh)
+    # Its failures take no time: stop it, or it fails every trial before w-with-mesh has warmed up.
+    assert cluster.stop("w-without-mesh") == 0
+    cluster.start_worker("w-with-mesh", data_dir=with_mesh)
     study = cluster.wait_until_done(study_id)
 
     assert study["status"] == "done", study["message"]
     trials = assert_every_trial_has_exactly_one_result(cluster, study_id)
     failed = [trial for trial in trials if trial["worker"] == "w-without-mesh"]
     assert failed and all(trial["status"] == "error" for trial in failed)
-    assert all("tray.mesh_file tray.stl does not exist" in trial["message"] for trial in failed)
+    missing = without_mesh.resolve() / "meshes" / "trays" / "tray.stl"
+    assert all(f"tray.mesh_file {missing} does not exist" in trial["message"] for trial in failed)
+    assert {trial["status"] for trial in trials if trial["worker"] != "w-without-mesh"} == {"ok"}
 
 
 def test_a_worker_stopped_with_sigterm_finishes_its_trial_first(cluster):

@@ -114,6 +114,37 @@ def test_trial_without_snapshots_writes_nothing(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_relative_mesh_path_is_read_from_this_workers_mesh_directory(tmp_path):
+    import trimesh
+
+    from dem.scenarios.tray import TrayConfig, parametric_tray_mesh
+
+    mine, theirs = tmp_path / "mine", tmp_path / "theirs"
+    (mine / "trays").mkdir(parents=True)
+    theirs.mkdir()
+    vertices, faces = parametric_tray_mesh(TrayConfig())
+    trimesh.Trimesh(vertices, faces, process=False).export(mine / "trays" / "t.stl")
+    spec = tiny_spec(trial="t-mesh", scenario={**TINY_SCENARIO, "tray": {"mesh_file": "trays/t.stl"}})
+
+    here = SimulationResult.model_validate(run_trial(spec, mesh_root=mine))
+    elsewhere = SimulationResult.model_validate(run_trial(spec, mesh_root=theirs))
+
+    assert here.status is SimulationStatus.OK, here.message
+    assert elsewhere.status is SimulationStatus.ERROR
+    assert f"tray.mesh_file {theirs / 'trays' / 't.stl'} does not exist" in elsewhere.message
+
+
+def test_a_relative_mesh_path_leaving_the_mesh_directory_is_an_error_result(tmp_path):
+    (tmp_path / "outside.stl").write_text("solid x\nendsolid x\n")
+    (tmp_path / "meshes").mkdir()
+    spec = tiny_spec(trial="t-out", scenario={**TINY_SCENARIO, "tray": {"mesh_file": "../outside.stl"}})
+
+    result = SimulationResult.model_validate(run_trial(spec, mesh_root=tmp_path / "meshes"))
+
+    assert result.status is SimulationStatus.ERROR
+    assert "leaves the mesh directory" in result.message
+
+
 def test_longest_first_starts_the_stiffest_trials_first():
     specs = [TrialSpec(f"t-{i}", "t", i, 0, 0, i, {**PARAMS, "E": E}, TINY_SCENARIO) for i, E in
              enumerate([1e6, 1e8, 1e7])]

@@ -1,0 +1,53 @@
+"""The files a scenario config names, and where a worker finds them: its own mesh directory.
+
+A scenario's ``tray.mesh_file`` and ``items.folder`` name files the engine opens. A scenario sent
+through the API names them relative to the mesh directory (``$DEMCAL_DATA_DIR/meshes``) and is
+stored so; each process that runs a trial resolves them against *its own* mesh directory
+(``resolve_paths``), so a worker on another machine reads its copy (or a shared volume) and never
+a path of the server's. An absolute path (a local ``demcal calibrate`` or ``simulate`` reading
+the user's own files) is used as it is.
+
+Must not: open the files; the scenario does that, and says what is wrong with them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+MESH_SUBDIR = "meshes"
+# (section, field) of every path a scenario config may hold.
+SCENARIO_PATHS = (("tray", "mesh_file"), ("items", "folder"))
+
+
+class ScenarioPathError(ValueError):
+    """A relative path that leaves the mesh directory (``..``, a symbolic link out of it)."""
+
+
+def mesh_root(data_dir: Path | str) -> Path:
+    """The mesh directory of a data directory, absolute with symbolic links resolved."""
+    return (Path(data_dir) / MESH_SUBDIR).resolve()
+
+
+def inside(root: Path, given: str) -> Path | None:
+    """``given`` resolved against ``root`` if it stays inside it, else None."""
+    resolved = (root / given).resolve()  # an absolute ``given`` replaces the root
+    return resolved if "\x00" not in given and resolved.is_relative_to(root) else None
+
+
+def resolve_paths(scenario: dict[str, Any], root: Path | None) -> dict[str, Any]:
+    """The scenario with its relative paths resolved inside ``root`` (a copy; absolute paths kept).
+    With no ``root``, relative paths stay relative to the working directory."""
+    if root is None:
+        return scenario
+    resolved = dict(scenario)
+    for section, field in SCENARIO_PATHS:
+        values = scenario.get(section)
+        given = values.get(field) if isinstance(values, dict) else None
+        if given in (None, "") or Path(given).is_absolute():
+            continue
+        path = inside(root, str(given))
+        if path is None:
+            raise ScenarioPathError(f"{section}.{field} {given!r} leaves the mesh directory {root}")
+        resolved[section] = {**values, field: str(path)}
+    return resolved
