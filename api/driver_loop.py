@@ -13,8 +13,9 @@ queue in step. (Not to be confused with ``api/services/``, the request services 
   jobs of dead workers out of its started registry (they are retried, or reported as errors) and
   re-submits lost single simulations. The database is the truth; nothing is lost, and a result
   that arrives twice is recorded once (the store ignores the second).
-* **Single simulations** share the executor with trials; their outcomes are told apart by asking
-  the store and recorded with ``record_simulation_result``.
+* **Single simulations** share the executor with trials; their outcomes are told apart by their
+  id (``api/store/simulations.is_simulation_id``, no query) and recorded with
+  ``record_simulation_result``.
 
 Must not: serve HTTP or know the GA; it only composes the driver, the store and an executor.
 """
@@ -31,25 +32,23 @@ import redis
 import sqlalchemy as sa
 
 from api.errors import NotFoundError
-from api.models import SimulationRow
 from api.settings import Settings
 from api.store import SqlStore
 from api.store.leases import DatabaseLeases
+from api.store.simulations import is_simulation_id
 from optimizer.driver import Driver
 from optimizer.protocols import (
+    ACTIVE_STUDIES,
+    STOPPING_STUDIES,
     Executor,
     StudyStatus,
     TrialOutcome,
     TrialSpec,
-    TrialState,
     is_trial_of,
 )
 
 logger = logging.getLogger(__name__)
 
-ACTIVE_STUDIES = (StudyStatus.CREATED, StudyStatus.RUNNING)
-# Statuses whose in-flight work the driver must withdraw (it does so when stepped once more).
-STOPPING_STUDIES = (StudyStatus.PAUSED, StudyStatus.CANCELLED)
 # Errors of the database or Redis themselves: they end the tick (retried later), never a study.
 INFRASTRUCTURE_ERRORS = (
     sa.exc.OperationalError,
@@ -66,9 +65,8 @@ class _Routed:
     """The executor as the driver sees it: outcomes of single simulations are kept aside for
     the service, so that the driver (which records whatever it polls as trials) never sees them."""
 
-    def __init__(self, executor: Executor, store: SqlStore) -> None:
+    def __init__(self, executor: Executor) -> None:
         self.executor = executor
-        self._store = store
         self.simulation_outcomes: list[TrialOutcome] = []
 
     def submit(self, specs: Sequence[TrialSpec]) -> None:
@@ -77,7 +75,7 @@ class _Routed:
     def poll(self, timeout: float = 0.0) -> list[TrialOutcome]:
         trials = []
         for outcome in self.executor.poll(timeout):
-            if self.is_simulation(outcome.trial_id):
+            if is_simulation_id(outcome.trial_id):
                 self.simulation_outcomes.append(outcome)
             else:
                 trials.append(outcome)
@@ -91,13 +89,6 @@ class _Routed:
 
     def close(self) -> None:
         self.executor.close()
-
-    def is_simulation(self, trial_id: str) -> bool:
-        try:
-            self._store.get_simulation(trial_id)
-        except NotFoundError:
-            return False
-        return True
 
 
 class DriverLoop:
@@ -119,7 +110,7 @@ class DriverLoop:
         self.poll_s = poll_s
         self.scan_every_s = scan_every_s
         self.reconcile_every_s = reconcile_every_s
-        self._routed = _Routed(executor, store)
+        self._routed = _Routed(executor)
         self.driver = Driver(store, self._routed, reconcile_every_s=reconcile_every_s)
         self.held: set[str] = set()
         self._last_scan = -float("inf")
@@ -231,7 +222,7 @@ class DriverLoop:
         if running is None:
             return
         for trial_id, worker in running().items():
-            if self._routed.is_simulation(trial_id):
+            if is_simulation_id(trial_id):
                 self.store.mark_simulation_running(trial_id, worker)
             else:
                 self.store.mark_running(trial_id, worker)
@@ -282,14 +273,7 @@ class DriverLoop:
 
     def _reconcile_simulations(self) -> None:
         """Simulations the database has in flight but the executor lost go back to pending."""
-        with self.store.session() as session:
-            in_db = list(
-                session.scalars(
-                    sa.select(SimulationRow.id).where(
-                        SimulationRow.state.in_([TrialState.QUEUED.value, TrialState.RUNNING.value])
-                    )
-                )
-            )
+        in_db = self.store.in_flight_simulations()
         if not in_db:
             return
         self._watch("")

@@ -12,8 +12,15 @@ objectives and constraints (``optimizer/ga.py``): the match first, invalid runs 
     submit pending trials (and, on start and every ``reconcile_every_s``, re-submit queued or
     running trials the executor no longer knows: lost with a restarted process or a flushed queue)
     poll the executor -> record each outcome once (the store ignores duplicates)
-    batch complete -> objectives -> tell -> Pareto + recommendation -> save_generation (atomic)
+    batch complete -> objectives -> tell -> Pareto + recommendation -> save_generation (atomic,
+    with the objectives of the batch's individuals: the store computes nothing)
     last batch saved -> status done
+
+No round trips on the data path: the driver keeps a copy of each study's trials, read whole on
+start and at each reconciliation and otherwise only what changed since the last poll
+(``Store.changed_trials``); its own writes (queued, results) go into the copy as it makes them,
+and only an individual that gained a result is evaluated again, so a poll costs the same on a
+study of ten trials or ten thousand.
 
 Two ways to use it:
 
@@ -36,8 +43,9 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
@@ -46,15 +54,21 @@ from dem.result import SimulationStatus
 from optimizer import validation
 from optimizer.ga import Search, create_search, from_bytes, to_bytes
 from optimizer.objectives import Evaluation, evaluate, match_rule, observation
+from optimizer.outcomes import shown_objectives
 from optimizer.pareto import Ranking, rank, recommendation_json, summary
 from optimizer.protocols import (
+    ACTIVE_STUDIES,
+    IN_FLIGHT,
+    STOPPING_STUDIES,
     Executor,
     Store,
     StudyRecord,
     StudyStatus,
+    TrialOutcome,
     TrialRecord,
     TrialSpec,
     TrialState,
+    study_of,
     trial_id,
 )
 from optimizer.replicates import allocate
@@ -64,9 +78,6 @@ from optimizer.study import VALIDATION_REPLICATE_BASE, StudyDefinition, describe
 from optimizer.validation import NOT_VALIDATED
 
 logger = logging.getLogger(__name__)
-
-ACTIVE = (StudyStatus.CREATED, StudyStatus.RUNNING)
-IN_FLIGHT = (TrialState.QUEUED, TrialState.RUNNING)
 
 
 @dataclass(frozen=True)
@@ -87,7 +98,7 @@ class Progress:
 
     @property
     def active(self) -> bool:
-        return self.status in ACTIVE
+        return self.status in ACTIVE_STUDIES
 
 
 @dataclass
@@ -110,6 +121,61 @@ class _Study:
         return self.definition.validation_batch()
 
 
+@dataclass
+class _Known:
+    """The driver's copy of one study's trials, and the f1 of each individual that measured
+    (what ``Progress.best_f1`` needs) kept up to date one individual at a time."""
+
+    context: _Study
+    records: dict[str, TrialRecord] = field(default_factory=dict)
+    members: dict[int, list[str]] = field(default_factory=dict)  # individual -> its trial ids
+    f1: dict[int, float] = field(default_factory=dict)
+    cursor: Any = None
+
+    def merge(self, changed: Iterable[TrialRecord]) -> None:
+        gained = set()
+        for record in changed:
+            tid, before = record.spec.trial_id, self.records.get(record.spec.trial_id)
+            if before is None:
+                self.members.setdefault(record.spec.individual, []).append(tid)
+            if record.result is not None and (before is None or before.result is None):
+                gained.add(record.spec.individual)
+            self.records[tid] = record
+        for individual in gained:
+            group = [self.records[tid] for tid in self.members[individual]]
+            definition, n_items = self.context.definition, self.context.n_items
+            measured = [ev for ev in evaluate(group, definition, n_items) if ev.ok]
+            if measured:
+                self.f1[individual] = measured[0].f1
+            else:
+                self.f1.pop(individual, None)
+
+    def queued(self, specs: Iterable[TrialSpec]) -> None:
+        """The driver's own ``mark_queued``, as the store applies it."""
+        for spec in specs:
+            record = self.records.get(spec.trial_id)
+            if record is None:
+                self.merge([TrialRecord(spec, TrialState.QUEUED, attempts=1)])
+            elif record.state in (TrialState.PENDING, TrialState.QUEUED):
+                record.state = TrialState.QUEUED
+
+    def recorded(self, outcome: TrialOutcome) -> None:
+        """The driver's own ``record_result`` that the store accepted."""
+        record = self.records.get(outcome.trial_id)
+        if record is not None:
+            self.merge([replace(record, state=TrialState.DONE, result=outcome.result, worker=outcome.worker)])
+
+    def ordered(self) -> list[TrialRecord]:
+        """The records in the store's order (individual, replicate)."""
+        return sorted(self.records.values(), key=lambda rec: (rec.spec.individual, rec.spec.replicate))
+
+    def finished(self, specs: Iterable[TrialSpec]) -> bool:
+        return all(
+            (record := self.records.get(spec.trial_id)) is not None and record.result is not None
+            for spec in specs
+        )
+
+
 class Driver:
     def __init__(self, store: Store, executor: Executor, *, reconcile_every_s: float = 30.0):
         self.store = store
@@ -117,6 +183,7 @@ class Driver:
         self.reconcile_every_s = reconcile_every_s
         self._studies: dict[str, _Study] = {}
         self._batches: dict[str, _Batch] = {}
+        self._known: dict[str, _Known] = {}
         self._last_reconcile: dict[str, float] = {}
 
     # -- the two entry points -------------------------------------------------------------------
@@ -143,30 +210,56 @@ class Driver:
         except ValidationError as exc:
             message = f"the stored definition is invalid: {describe_validation_error(exc)}"
             self.store.set_status(study_id, StudyStatus.FAILED, message)
-            return self._progress(self.store.load_study(study_id), None, [], 0)
-        if study.status in (StudyStatus.PAUSED, StudyStatus.CANCELLED):
+            return self._progress(self.store.load_study(study_id), None, 0)
+        if study.status in STOPPING_STUDIES:
             self._withdraw(study_id)
-        if study.status not in ACTIVE:
-            return self._progress(study, context, self.store.trials(study_id), 0)
+        if study.status not in ACTIVE_STUDIES:
+            self._known.pop(study_id, None)
+            return self._progress(study, self._read(study_id, context), 0)
         if study.status is StudyStatus.CREATED:
             self.store.set_status(study_id, StudyStatus.RUNNING)
             study.status = StudyStatus.RUNNING
 
-        records = self.store.trials(study_id)
+        reconcile = self._reconcile_due(study_id)
+        known = self._read(study_id, context, incremental=not reconcile)
         if study.generation > context.last_batch:
             # The last batch was saved but the process stopped before marking the study done.
             self.store.set_status(study_id, StudyStatus.DONE, study.message)
-            return self._progress(self.store.load_study(study_id), context, records, 0)
-        batch = self._current_batch(study, context, records)
-        self._submit(study_id, batch, records)
-        recorded = sum(self.store.record_result(outcome) for outcome in self.executor.poll(timeout))
-        if recorded:
-            records = self.store.trials(study_id)
-        done = {record.spec.trial_id for record in records if record.result is not None}
-        if all(spec.trial_id in done for spec in batch.specs):
-            self._complete(study, context, batch, records)
+            return self._progress(self.store.load_study(study_id), known, 0)
+        batch = self._current_batch(study, context, known)
+        self._submit(study_id, batch, known, reconcile)
+        recorded = self._record(self.executor.poll(timeout))
+        if known.finished(batch.specs):
+            self._complete(study, context, batch, known.ordered())
             study = self.store.load_study(study_id)
-        return self._progress(study, context, records, recorded)
+        return self._progress(study, known, recorded)
+
+    def _read(self, study_id: str, context: _Study, incremental: bool = False) -> _Known:
+        """The study's trials: what changed since the last read, or all of them (a new copy)."""
+        known = self._known.get(study_id) if incremental else None
+        if known is None:
+            known = self._known[study_id] = _Known(context)
+        changed, known.cursor = self.store.changed_trials(study_id, known.cursor)
+        known.merge(changed)
+        return known
+
+    def _record(self, outcomes: list[TrialOutcome]) -> int:
+        """Record outcomes of any study sharing the executor; each study's copy learns its own."""
+        recorded = 0
+        for outcome in outcomes:
+            if self.store.record_result(outcome):
+                recorded += 1
+                known = self._known.get(study_of(outcome.trial_id))
+                if known is not None:
+                    known.recorded(outcome)
+        return recorded
+
+    def _reconcile_due(self, study_id: str) -> bool:
+        now = time.monotonic()
+        if now - self._last_reconcile.get(study_id, -np.inf) < self.reconcile_every_s:
+            return False
+        self._last_reconcile[study_id] = now
+        return True
 
     # -- batches --------------------------------------------------------------------------------
 
@@ -178,11 +271,11 @@ class Driver:
             )
         return self._studies[study.study_id]
 
-    def _current_batch(self, study: StudyRecord, context: _Study, records: list[TrialRecord]) -> _Batch:
+    def _current_batch(self, study: StudyRecord, context: _Study, known: _Known) -> _Batch:
         cached = self._batches.get(study.study_id)
         if cached is not None and cached.index == study.generation:
             return cached
-        definition = context.definition
+        definition, records = context.definition, known.ordered()
         if study.generation <= definition.ga.generations:
             batch = self._ga_batch(study, context, records)
         elif study.generation == definition.replicate_batch():
@@ -369,8 +462,11 @@ class Driver:
         elif recommendation is not None:
             recommendation["validation_status"] = NOT_VALIDATED
         pareto_ids = [tid for evaluation in ranking.pareto for tid in evaluation.trial_ids]
+        # Shown objectives depend on an individual's own results only: those of this batch's.
+        touched = {spec.individual for spec in batch.specs}
+        objectives = shown_objectives([ev for ev in evaluations if ev.individual in touched])
         self.store.save_generation(
-            study.study_id, batch.index + 1, ga_state or b"", pareto_ids, recommendation
+            study.study_id, batch.index + 1, ga_state or b"", pareto_ids, recommendation, objectives
         )
         self._batches.pop(study.study_id, None)
         logger.info(
@@ -388,21 +484,21 @@ class Driver:
 
     # -- execution ------------------------------------------------------------------------------
 
-    def _submit(self, study_id: str, batch: _Batch, records: list[TrialRecord]) -> None:
-        states = {record.spec.trial_id: record.state for record in records}
+    def _submit(self, study_id: str, batch: _Batch, known: _Known, reconcile: bool) -> None:
+        """Send the batch's pending trials; on reconciliation also those in flight that the
+        executor no longer knows (lost with a restarted process or a flushed queue)."""
+        states = {tid: record.state for tid, record in known.records.items()}
         to_send = [
             spec
             for spec in batch.specs
             if states.get(spec.trial_id, TrialState.PENDING) is TrialState.PENDING
         ]
-        now = time.monotonic()
-        if now - self._last_reconcile.get(study_id, -np.inf) >= self.reconcile_every_s:
-            self._last_reconcile[study_id] = now
-            known = self.executor.in_flight()
+        if reconcile:
+            known_to_executor = self.executor.in_flight()
             lost = [
                 spec
                 for spec in batch.specs
-                if states.get(spec.trial_id) in IN_FLIGHT and spec.trial_id not in known
+                if states.get(spec.trial_id) in IN_FLIGHT and spec.trial_id not in known_to_executor
             ]
             if lost:
                 logger.info(
@@ -418,6 +514,7 @@ class Driver:
                     self.store.mark_queued(ids, message)
                 elif ids:
                     self.store.mark_queued(ids)
+            known.queued(to_send)
 
     def _withdraw(self, study_id: str) -> None:
         """Stop a paused or cancelled study's work; on resume, reconciliation re-sends it."""
@@ -430,21 +527,18 @@ class Driver:
                 self.executor.cancel(in_flight)
             self._last_reconcile.pop(study_id, None)
             self._batches.pop(study_id, None)
+            self._known.pop(study_id, None)
 
     # -- reporting ------------------------------------------------------------------------------
 
-    def _progress(
-        self, study: StudyRecord, context: _Study | None, records: list[TrialRecord], recorded: int
-    ) -> Progress:
-        evaluations: list[Evaluation] = []
+    def _progress(self, study: StudyRecord, known: _Known | None, recorded: int) -> Progress:
+        records = [] if known is None else known.records.values()
         batches = planned = 0
-        if context is not None:
-            definition = context.definition
-            evaluations = evaluate(records, definition, context.n_items)
-            batches = context.last_batch + 1
+        if known is not None:
+            definition = known.context.definition
+            batches = known.context.last_batch + 1
             extra = sum(record.spec.replicate >= definition.replicates for record in records)
-            checking = definition.validation_batch()
-            if study.generation < checking:
+            if study.generation < definition.validation_batch():
                 extra += definition.validation.simulations()  # an upper bound until it starts
             planned = definition.search_simulations() + extra
         return Progress(
@@ -455,7 +549,7 @@ class Driver:
             trials_done=sum(record.result is not None for record in records),
             trials_planned=planned,
             trials_in_flight=sum(record.state in IN_FLIGHT for record in records),
-            best_f1=min((evaluation.f1 for evaluation in evaluations if evaluation.ok), default=None),
+            best_f1=min(known.f1.values(), default=None) if known is not None else None,
             recommendation=study.recommendation,
             recorded=recorded,
             message=study.message,

@@ -14,7 +14,7 @@ import math
 import threading
 import uuid
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -41,7 +41,11 @@ class MemoryStore:
         self._lock = threading.Lock()
         self._studies: dict[str, StudyRecord] = {}
         self._trials: dict[str, TrialRecord] = {}
+        # A write counter stands in for the SQL store's ``updated_at``: trial id -> its last write.
+        self._writes = 0
+        self._written: dict[str, int] = {}
         self.generations: list[tuple[str, int, list[str]]] = []
+        self.objectives: dict[str, tuple[float | None, ...]] = {}
 
     def create_study(self, definition: dict[str, Any], owner: str | None = None) -> str:
         study_id = uuid.uuid4().hex[:12]
@@ -65,7 +69,13 @@ class MemoryStore:
     def add_trials(self, specs: Sequence[TrialSpec]) -> None:
         with self._lock:
             for spec in specs:
-                self._trials.setdefault(spec.trial_id, TrialRecord(spec, TrialState.PENDING))
+                if spec.trial_id not in self._trials:
+                    self._trials[spec.trial_id] = TrialRecord(spec, TrialState.PENDING)
+                    self._touch(spec.trial_id)
+
+    def _touch(self, trial: str) -> None:
+        self._writes += 1
+        self._written[trial] = self._writes
 
     def trials(self, study_id: str, states: Sequence[TrialState] | None = None) -> list[TrialRecord]:
         with self._lock:
@@ -75,6 +85,15 @@ class MemoryStore:
                 if record.spec.study_id == study_id and (states is None or record.state in states)
             ]
 
+    def changed_trials(self, study_id: str, since: int | None = None) -> tuple[list[TrialRecord], int | None]:
+        with self._lock:
+            changed = [
+                copy.deepcopy(record)
+                for tid, record in self._trials.items()
+                if record.spec.study_id == study_id and (since is None or self._written[tid] > since)
+            ]
+            return changed, self._writes
+
     def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
         with self._lock:
             for tid in trial_ids:
@@ -82,6 +101,7 @@ class MemoryStore:
                 if record.state is not TrialState.DONE:
                     record.state = TrialState.QUEUED
                     record.attempts += 1
+                    self._touch(tid)
 
     def mark_running(self, trial_id: str, worker: str | None = None) -> None:
         with self._lock:
@@ -89,6 +109,7 @@ class MemoryStore:
             if record.state is not TrialState.DONE:
                 record.state = TrialState.RUNNING
                 record.worker = worker
+                self._touch(trial_id)
 
     def record_result(self, outcome: TrialOutcome) -> bool:
         with self._lock:
@@ -98,6 +119,7 @@ class MemoryStore:
             record.result = outcome.result
             record.state = TrialState.DONE
             record.worker = outcome.worker
+            self._touch(outcome.trial_id)
             return True
 
     def save_generation(
@@ -107,6 +129,7 @@ class MemoryStore:
         ga_state: bytes,
         pareto_trial_ids: Sequence[str],
         recommendation: dict[str, Any] | None,
+        objectives: Mapping[str, Sequence[float | None]] | None = None,
     ) -> None:
         with self._lock:
             study = self._studies[study_id]
@@ -114,6 +137,7 @@ class MemoryStore:
             study.ga_state = ga_state
             study.recommendation = copy.deepcopy(recommendation)
             self.generations.append((study_id, generation, list(pareto_trial_ids)))
+            self.objectives.update({tid: tuple(values) for tid, values in (objectives or {}).items()})
 
 
 def synthetic_result(spec: TrialSpec, n_items: int = 30) -> SimulationResult:

@@ -8,7 +8,7 @@ seed. Its id is deterministic, so a re-sent result or a re-enqueued job maps to 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol
@@ -34,9 +34,19 @@ class StudyStatus(StrEnum):
     FAILED = "failed"
 
 
+ACTIVE_STUDIES = (StudyStatus.CREATED, StudyStatus.RUNNING)  # a driver advances these
+STOPPING_STUDIES = (StudyStatus.PAUSED, StudyStatus.CANCELLED)  # their in-flight work is withdrawn
+IN_FLIGHT = (TrialState.QUEUED, TrialState.RUNNING)
+
+
 def trial_id(study_id: str, individual: int, replicate: int) -> str:
     """The one place trial ids are made: stable across restarts and re-enqueues."""
     return f"{study_id}-i{individual:05d}-r{replicate:02d}"
+
+
+def study_of(trial: str) -> str:
+    """The study a trial id belongs to (``trial_id``'s inverse), without asking the store."""
+    return trial.rpartition("-i")[0]
 
 
 def is_trial_of(trial: str, study_id: str) -> bool:
@@ -129,6 +139,10 @@ class Store(Protocol):
 
     def trials(self, study_id: str, states: Sequence[TrialState] | None = None) -> list[TrialRecord]: ...
 
+    def changed_trials(self, study_id: str, since: Any = None) -> tuple[list[TrialRecord], Any]:
+        """The study's trials written since the cursor ``since`` (all of them when None), and the
+        cursor for the next call. A trial may come back again; the caller upserts by id."""
+
     def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
         """Queued trials; ``message`` says why they may wait (e.g. no worker has their engine)."""
 
@@ -144,5 +158,8 @@ class Store(Protocol):
         ga_state: bytes,
         pareto_trial_ids: Sequence[str],
         recommendation: dict[str, Any] | None,
+        objectives: Mapping[str, Sequence[float | None]] | None = None,
     ) -> None:
-        """Persist the GA after a generation, atomically with its Pareto ranking."""
+        """Persist the GA after a generation, atomically with its Pareto ranking and the shown
+        (f1, f2) of the trials whose objectives the generation changed (trial id -> values;
+        ``optimizer/outcomes.shown_objectives``). The store computes nothing itself."""

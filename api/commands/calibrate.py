@@ -100,8 +100,11 @@ def _load(study_file: Path | None):
 
 
 def _create(store, definition, leases) -> str:
+    from api.services.studies import study_warnings
+
     experiments = definition.experiments
-    study_id = store.create_study(definition.model_dump(mode="json"), None)
+    warnings = study_warnings(definition)
+    study_id = store.create_study(definition.model_dump(mode="json"), None, warnings=warnings)
     if not leases.acquire(study_id):  # a serve replica scanned in between: let it drive
         _fail(f"study {study_id} was taken by `demcal serve` at once; follow it on the dashboard")
     typer.echo(
@@ -112,8 +115,7 @@ def _create(store, definition, leases) -> str:
         f"{definition.replicates} replicate(s) on common seeds, validation on "
         f"{definition.validation.seeds} fresh seeds"
     )
-    warning = definition.validity_warning()
-    if warning:
+    for warning in warnings:
         typer.secho(f"warning: {warning}", err=True, fg="yellow")
     return study_id
 

@@ -45,7 +45,7 @@ def create_study(
         raise InvalidInputError(str(exc)) from None
     document = definition.model_dump(mode="json")
     document["scenario"] = confine_paths(document["scenario"], data_dir)
-    study_id = store.create_study(document, owner=principal.owner)
+    study_id = store.create_study(document, owner=principal.owner, warnings=study_warnings(definition))
     return get_study(store, study_id, principal)
 
 
@@ -54,14 +54,27 @@ def _failures(status_counts: dict[str, int]) -> Failures:
     return Failures(**counts.as_json(), text=counts.text())
 
 
-def _warnings(definition: dict) -> list[str]:
-    """The study's warnings; an estimate that cannot be made (a user mesh missing here) is none."""
+def study_warnings(definition: StudyDefinition) -> list[str]:
+    """The study's warnings, computed once when it is created and stored with it (the estimate
+    builds the scenario's items); one that cannot be made (a user mesh missing here) is none."""
     try:
-        warning = StudyDefinition.model_validate(definition).validity_warning()
-    except Exception:  # noqa: BLE001 - a warning must never turn a read into a 500
+        warning = definition.validity_warning()
+    except Exception:  # noqa: BLE001 - a warning must never turn a request into a 500
         logger.warning("no validity estimate for this study's scenario", exc_info=True)
         return []
     return [warning] if warning else []
+
+
+def _warnings(store: SqlStore, row) -> list[str]:
+    """The stored warnings; a study made before they were stored gets them once, now."""
+    stored = (row.extra or {}).get("warnings")
+    if stored is None:
+        try:
+            stored = study_warnings(StudyDefinition.model_validate(row.definition))
+        except ValueError:
+            return []
+        store.keep_warnings(row.id, stored)
+    return stored
 
 
 def _budget(definition: dict) -> tuple[int, int]:
@@ -90,7 +103,7 @@ def get_study(store: SqlStore, study_id: str, principal: Principal) -> StudyRead
             generations_total=generations_total,
         ),
         best=trial_read(best) if best is not None else None,
-        recommendation=row.recommendation, warnings=_warnings(row.definition),
+        recommendation=row.recommendation, warnings=_warnings(store, row),
         created_at=row.created_at, updated_at=row.updated_at,
         started_at=row.started_at, finished_at=row.finished_at, responses=declared_responses(row.definition),
     )

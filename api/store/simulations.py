@@ -19,7 +19,15 @@ from api.errors import NotFoundError
 from api.models import SimulationRow, utcnow
 from api.store.base import ALL_OWNERS, Page, StoreBase, new_id, result_columns
 from dem.result import SimulationResult
-from optimizer.protocols import TrialSpec, TrialState
+from optimizer.protocols import IN_FLIGHT, TrialSpec, TrialState
+
+SIMULATION_ID_PREFIX = "sim-"
+
+
+def is_simulation_id(job_id: str) -> bool:
+    """Whether an executor's job is a single simulation rather than a trial (whose ids are
+    ``<study id>-i...``, ``optimizer.protocols.trial_id``), from the id alone: no query."""
+    return job_id.startswith(SIMULATION_ID_PREFIX)
 
 
 class SimulationStore(StoreBase):
@@ -32,7 +40,7 @@ class SimulationStore(StoreBase):
         timeout_s: float | None = None,
         engine: str = "numba",
     ) -> str:
-        sim_id = new_id("sim-")
+        sim_id = new_id(SIMULATION_ID_PREFIX)
         with self.session() as s:
             s.add(
                 SimulationRow(
@@ -71,6 +79,15 @@ class SimulationStore(StoreBase):
                 )
                 for row in rows
             ]
+
+    def in_flight_simulations(self) -> list[str]:
+        """Ids of the simulations handed to an executor and not finished (for reconciliation)."""
+        with self.session() as s:
+            return list(
+                s.scalars(
+                    sa.select(SimulationRow.id).where(SimulationRow.state.in_([st.value for st in IN_FLIGHT]))
+                )
+            )
 
     def _move_simulations(self, sim_ids: Sequence[str], from_states: Sequence[TrialState], **values) -> int:
         with self.session() as s:

@@ -12,7 +12,7 @@ from sqlalchemy.orm import undefer
 
 from api.errors import NotFoundError
 from api.models import StudyRow, TrialRow, UTCDateTime, encode_value, utcnow
-from api.store.base import ALL_OWNERS, Page, StoreBase, chunks, new_id, owner_clause, trial_record
+from api.store.base import ALL_OWNERS, Page, StoreBase, chunks, new_id, owner_clause
 from optimizer.protocols import StudyRecord, StudyStatus, TrialState
 
 log = logging.getLogger(__name__)
@@ -20,9 +20,15 @@ log = logging.getLogger(__name__)
 
 class StudyStore(StoreBase):
     def create_study(
-        self, definition_json: dict[str, Any], owner: str | None, name: str | None = None
+        self,
+        definition_json: dict[str, Any],
+        owner: str | None,
+        name: str | None = None,
+        warnings: Sequence[str] | None = None,
     ) -> str:
-        """Store a validated study definition as a new study in status ``created``; its id."""
+        """Store a validated study definition as a new study in status ``created``; its id.
+        ``warnings`` (``StudyDefinition.warnings``, computed once here rather than on every read)
+        are kept in ``extra["warnings"]``."""
         study_id = new_id("st-")
         with self.session() as s:
             s.add(
@@ -32,7 +38,7 @@ class StudyStore(StoreBase):
                     owner=owner,
                     status=StudyStatus.CREATED.value,
                     definition=definition_json,
-                    extra={},
+                    extra={} if warnings is None else {"warnings": list(warnings)},
                 )
             )
         log.info("study %s created for owner %s", study_id, owner)
@@ -76,6 +82,18 @@ class StudyStore(StoreBase):
                 recommendation=row.recommendation,
                 message=row.message,
                 extra=dict(row.extra or {}),
+            )
+
+    def keep_warnings(self, study_id: str, warnings: Sequence[str]) -> None:
+        """Store the warnings of a study made before they were stored at creation; no change of
+        the study for cached views (its ``updated_at`` stays)."""
+        with self.session() as s:
+            extra = s.scalar(sa.select(StudyRow.extra).where(StudyRow.id == study_id)) or {}
+            s.execute(
+                sa.update(StudyRow)
+                .where(StudyRow.id == study_id)
+                .values(extra={**extra, "warnings": list(warnings)}, updated_at=StudyRow.updated_at)
+                .execution_options(synchronize_session=False)
             )
 
     def list_studies(
@@ -154,17 +172,11 @@ class StudyStore(StoreBase):
         recommendation: dict[str, Any] | None,
         objectives: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
-        """Persist the GA after a generation, atomically with its Pareto ranking and objectives.
-
-        ``objectives`` maps trial ids to their (f1, f2) (values may be infinite or None). Without
-        it the objectives of every finished individual are computed here with the optimiser's own
-        ``optimizer.objectives.evaluate``, so that lists and plots show the f1/f2 the GA was told,
-        except that a failed individual's are stored as null: its penalty is not a measurement.
-        """
+        """Persist the GA after a generation, atomically with its Pareto ranking and the (f1, f2)
+        the driver hands over (trial id -> values, which may be infinite or None), as the Store
+        protocol says; trials not named keep theirs."""
         with self.session() as s:
             row = self._study_row(s, study_id)
-            if objectives is None:
-                objectives = self._evaluate(s, row)
             row.generation = generation
             row.ga_state = ga_state
             row.recommendation = recommendation
@@ -190,22 +202,6 @@ class StudyStore(StoreBase):
                          "f2_value": f2_value, "f2_kind": f2_kind, "updated_at": now}
                     )
                 s.execute(sa.update(TrialRow), updates)
-
-    def _evaluate(self, s, study: StudyRow) -> dict[str, tuple[float | None, float | None]]:
-        """(f1, f2) per finished trial as views show them: null for a failed individual, whose
-        penalty is the search's business, not a measurement (``optimizer/outcomes.py``)."""
-        from optimizer.objectives import evaluate
-        from optimizer.outcomes import shown_objectives
-        from optimizer.study import StudyDefinition
-
-        definition = StudyDefinition.model_validate(study.definition)
-        rows = s.scalars(
-            sa.select(TrialRow)
-            .where(TrialRow.study_id == study.id, TrialRow.state == TrialState.DONE.value)
-            .options(undefer(TrialRow.scenario), undefer(TrialRow.result))
-        )
-        records = [trial_record(row) for row in rows if row.result is not None]
-        return shown_objectives(evaluate(records, definition, definition.n_items()))
 
 
 FINISHED_STUDIES = (StudyStatus.DONE, StudyStatus.CANCELLED, StudyStatus.FAILED)

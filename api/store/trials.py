@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from datetime import datetime
 
 import sqlalchemy as sa
 from sqlalchemy.orm import undefer
@@ -54,16 +55,26 @@ class TrialStore(StoreBase):
                 )
 
     def trials(self, study_id: str, states: Sequence[TrialState] | None = None) -> list[TrialRecord]:
-        query = (
-            sa.select(TrialRow)
-            .where(TrialRow.study_id == study_id)
-            .options(undefer(TrialRow.scenario), undefer(TrialRow.result))
-            .order_by(TrialRow.individual, TrialRow.replicate)
-        )
+        query = _records(study_id)
         if states is not None:
             query = query.where(TrialRow.state.in_([st.value for st in states]))
         with self.session() as s:
             return [trial_record(row) for row in s.scalars(query)]
+
+    def changed_trials(
+        self, study_id: str, since: datetime | None = None
+    ) -> tuple[list[TrialRecord], datetime | None]:
+        """Trials whose ``updated_at`` is at or after the cursor (every write sets it), and the
+        newest ``updated_at`` read as the next cursor. ">=" sends a row written in the same clock
+        tick again rather than miss it. A row committed late with an older stamp (another
+        process's clock, a slow commit) can still be missed: the driver reads everything again
+        when it reconciles (``Driver.reconcile_every_s``)."""
+        query = _records(study_id)
+        if since is not None:
+            query = query.where(TrialRow.updated_at >= since)
+        with self.session() as s:
+            rows = list(s.scalars(query))
+            return [trial_record(row) for row in rows], max((row.updated_at for row in rows), default=since)
 
     def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
         """Queued; ``message`` says why they may wait (no worker has their engine yet)."""
@@ -140,3 +151,13 @@ class TrialStore(StoreBase):
                 )
             return row
 
+
+
+def _records(study_id: str) -> sa.Select:
+    """A study's trials with what a ``TrialRecord`` needs, in (individual, replicate) order."""
+    return (
+        sa.select(TrialRow)
+        .where(TrialRow.study_id == study_id)
+        .options(undefer(TrialRow.scenario), undefer(TrialRow.result))
+        .order_by(TrialRow.individual, TrialRow.replicate)
+    )

@@ -109,3 +109,57 @@ def test_cancel_frees_the_local_pool_at_once_for_the_next_study(store):
         assert not store.trials(first, [TrialState.QUEUED, TrialState.RUNNING])
     finally:
         executor.close()
+
+
+def test_a_poll_reads_only_the_trials_written_since_the_last_and_never_a_simulation_per_result(store, engine):
+    import sqlalchemy as sa
+
+    from api.models import TrialRow
+
+    study_id = create(store, ga={"population": 8, "offspring": 4, "generations": 8})
+    store.create_simulation({}, {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.4}, 5, "alice")
+    loop = DriverLoop(
+        store, SyntheticExecutor(per_poll=3), DatabaseLeases(store, "test"),
+        poll_s=0.0, scan_every_s=3600.0, reconcile_every_s=3600.0,
+    )
+    statements: list[str] = []
+    loaded: list[TrialRow] = []
+
+    def newest() -> object:
+        with store.session() as s:
+            return s.scalar(sa.select(sa.func.max(TrialRow.updated_at)).where(TrialRow.study_id == study_id))
+
+    def tick() -> tuple[list[str], list[tuple[object, int]]]:
+        statements.clear(), loaded.clear()
+        sa.event.listen(engine, "before_cursor_execute", on_statement)
+        sa.event.listen(TrialRow, "load", on_load)
+        try:
+            loop.tick()
+        finally:
+            sa.event.remove(engine, "before_cursor_execute", on_statement)
+            sa.event.remove(TrialRow, "load", on_load)
+        return list(statements), [(row.updated_at, row.generation) for row in loaded]
+
+    def on_statement(conn, cursor, statement, *args):
+        statements.append(statement)
+
+    def on_load(row, context):
+        loaded.append(row)
+
+    ticks = []
+    while store.load_study(study_id).status is not StudyStatus.DONE:
+        ticks.append((newest(), *tick()))
+
+    total = len(store.trials(study_id))
+    read_per_tick = [len(rows) for _, _, rows in ticks[1:]]  # the first poll reads the study whole
+    assert total == 8 + 4 * 8 and len(ticks) > 16
+    assert max(read_per_tick) < total / 2
+    for (since, *_), (_, _, rows) in zip(ticks[1:], ticks[2:], strict=False):
+        # What a poll may read: the rows written since the previous poll began.
+        assert all(updated >= since for updated, _ in rows)
+    simulation_reads = [
+        sum(s.lstrip().upper().startswith("SELECT") and "FROM simulations" in s for s in sql)
+        for _, sql, _ in ticks[1:]
+    ]
+    assert max(simulation_reads) <= 1  # the pending list; never one per polled result
+    assert store.get_simulation(store.list_simulations(None, 1, 0).items[0].id).state == TrialState.DONE.value

@@ -9,10 +9,12 @@ import threading
 import pytest
 
 from api.errors import NotFoundError
-from api.models import TrialRow
+from api.models import TrialRow, decode_value
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.driver import Driver
-from optimizer.memory import SyntheticExecutor
+from optimizer.memory import SyntheticExecutor, synthetic_with_failures
+from optimizer.objectives import evaluate
+from optimizer.outcomes import shown_objectives
 from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, TrialState, trial_id
 from optimizer.study import StudyDefinition
 from tests.api.conftest import study_definition
@@ -121,19 +123,24 @@ def test_save_generation_stores_infinite_objectives_portably(store):
     assert (rows[specs[1].trial_id].f1_value, rows[specs[1].trial_id].f2_kind) == (0.5, "-inf")
 
 
-def test_save_generation_computes_the_optimisers_objectives_when_not_given(store):
-    study_id = store.create_study(_definition(), owner=None)
-    specs = _specs(study_id, 2)
-    store.add_trials(specs)
-    store.record_result(TrialOutcome(specs[0].trial_id, _result(4, wall=2.0)))
-    store.record_result(TrialOutcome(specs[1].trial_id, _result(9, wall=1.0)))
+def test_the_stored_objectives_are_those_the_driver_told_the_search(store):
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 8, "offspring": 4, "generations": 3}, max_replicates=3, seed=3)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="alice")
 
-    store.save_generation(study_id, 1, b"s", [specs[0].trial_id], None)
+    Driver(store, SyntheticExecutor(synthetic_with_failures)).run_to_completion(study_id, poll_timeout=0)
 
-    rows = {row.id: row for row in store.trial_columns(study_id)}
-    # Target: median of the measurements [3 4 4 2 5 3 4 6 3 4] = 4; f2 = cost (the default).
-    assert (rows[specs[0].trial_id].f1_value, rows[specs[0].trial_id].f2_value) == (0.0, 2000.0)
-    assert (rows[specs[1].trial_id].f1_value, rows[specs[1].trial_id].f2_value) == (5.0, 1000.0)
+    told = shown_objectives(evaluate(store.trials(study_id), definition, definition.n_items()))
+    stored = {
+        row.id: (decode_value(row.f1_value, row.f1_kind), decode_value(row.f2_value, row.f2_kind))
+        for row in store.trial_columns(study_id)
+    }
+    assert any(values == (None, None) for values in told.values())  # failed sets are not measurements
+    trials = store.trials(study_id)
+    assert set(told) == {r.spec.trial_id for r in trials if r.spec.generation < definition.validation_batch()}
+    assert any(r.spec.replicate > 0 for r in trials)  # sets earned extra replicates
+    assert {tid: stored[tid] for tid in told} == told
 
 
 def test_driver_runs_a_whole_study_on_the_sql_store(store):

@@ -147,3 +147,25 @@ def test_bounds_reaching_into_the_invalid_region_are_warned_about(client, keys):
 
     assert len(warned["warnings"]) == 1 and "likely to be invalid" in warned["warnings"][0]
     assert quiet["warnings"] == []
+
+
+def test_warnings_are_computed_when_a_study_is_created_not_on_every_read(client, keys, store, monkeypatch):
+    import optimizer.study
+
+    soft = study_definition(parameters={"E": {"low": 1e5, "high": 1e7}})
+    created = client.post("/api/v1/studies", json=soft, headers=keys.auth()).json()
+    legacy = store.create_study(created["definition"], owner="alice")  # as made before they were stored
+    estimates = []
+
+    def estimate(*args):
+        estimates.append(args)
+        return "recomputed"
+
+    monkeypatch.setattr(optimizer.study, "_validity_warning", estimate)
+    reads = [client.get(f"/api/v1/studies/{created['id']}", headers=keys.auth()).json() for _ in range(3)]
+    old = [client.get(f"/api/v1/studies/{legacy}", headers=keys.auth()).json() for _ in range(3)]
+
+    assert [read["warnings"] for read in reads] == [created["warnings"]] * 3
+    assert "likely to be invalid" in created["warnings"][0]
+    assert [read["warnings"] for read in old] == [["recomputed"]] * 3
+    assert len(estimates) == 1  # the legacy study's, once, then stored
