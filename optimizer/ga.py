@@ -154,8 +154,11 @@ class PymooSearch:
 Search = RandomSearch | PymooSearch | SurrogateSearch
 
 
-def create_search(settings: GASettings, n_genes: int, seed: int, rule: MatchRule | None = None) -> Search:
-    """The study's search; ``rule`` (how f1 is formed) is needed by the surrogate only."""
+def create_search(
+    settings: GASettings, n_genes: int, seed: int, rule: MatchRule | tuple[MatchRule, ...] | None = None
+) -> Search:
+    """The study's search; ``rule`` (how f1 is formed, one per experiment) is needed by the
+    surrogate only."""
     if settings.algorithm == "random":
         return RandomSearch(n_genes, settings.population, settings.offspring, seed)
     if settings.algorithm == "surrogate":

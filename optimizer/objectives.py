@@ -245,19 +245,29 @@ def evaluate(records: Iterable[TrialRecord], definition: StudyDefinition, n_item
     return evaluations
 
 
-def match_rule(definition: StudyDefinition, n_items: int) -> MatchRule:
-    """How f1 is formed, as the surrogate search models it (the same rule as match_distance)."""
-    experiment = definition.experiment
-    return MatchRule(
-        measured=tuple(experiment.measured),
-        target=experiment.target(),
-        tolerance=experiment.tolerance,
-        aggregate=experiment.aggregate,
-        distance=experiment.distance,
-        n_items=n_items,
+def match_rule(definition: StudyDefinition, n_items: int) -> MatchRule | tuple[MatchRule, ...]:
+    """How f1 is formed, as the surrogate search models it (the same rule as match_distance):
+    one rule per experiment when there are several (the study's f1 combines them)."""
+    failed = definition.failed_responses() if len(definition.experiments) > 1 else {}
+    rules = tuple(
+        MatchRule(
+            measured=tuple(experiment.measured),
+            target=experiment.target(),
+            tolerance=experiment.tolerance,
+            aggregate=experiment.aggregate,
+            distance=experiment.distance,
+            n_items=failed.get(experiment.response, n_items),
+            response=experiment.response,
+        )
+        for experiment in definition.experiments
     )
+    return rules[0] if len(rules) == 1 else rules
 
 
 def observation(evaluation: Evaluation) -> Observation:
-    """What a search that models the response needs beyond (f1, f2): the N_t values and failure."""
-    return Observation(tuple(evaluation.n_remaining) if evaluation.ok else (), evaluation.f2, evaluation.ok)
+    """What a search that models the response needs beyond (f1, f2): every experiment's values
+    over the replicates and the failure."""
+    if not evaluation.ok:
+        return Observation((), evaluation.f2, False)
+    responses = {name: tuple(values) for name, values in evaluation.responses.items()}
+    return Observation(tuple(evaluation.n_remaining), evaluation.f2, True, responses)

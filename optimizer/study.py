@@ -323,11 +323,6 @@ class StudyDefinition(_Strict):
             experiment.response = name
             if experiment.round is None:
                 experiment.round = "half_up" if declared[name].integer else "none"
-        if len(self.experiments) > 1 and self.ga.algorithm == "surrogate":
-            raise ValueError(
-                "ga.algorithm: the surrogate search models one response; with several experiments "
-                "use 'nsga2' (or 'spea2', 'random')"
-            )
         try:
             problem = refusal(self.engine, scenario, self.scenario, self.engine_options)
         except UnknownEngineError as exc:

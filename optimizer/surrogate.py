@@ -21,6 +21,14 @@ experiment, the cheapest. Each batch is chosen as follows.
 - **Feasibility.** A Gaussian-process classifier on ok vs failed (invalid, unstable, ...) runs
   gives ``P(ok)``; failures never enter the response model.
 - **Cost.** A Gaussian process on log(cost) (f2) of the successful sets.
+- **Several experiments** (a heap's angle and the feeder's N_t, say): one clog and size model
+  per experiment's response, each judged by its own rule; the study's combined f1 (max over
+  experiments of distance / tolerance, ``optimizer/objectives.py``) is <= 1 exactly when every
+  experiment matches, so P(match) is the product of the experiments' P(match) (the models are
+  fitted apart, so their posteriors are independent). A real-valued response (an angle) goes
+  through the same two parts: it is never 0, so the clog part is then a constant near 1 and the
+  size part models the value. Feasibility and cost are one model each: they belong to the run,
+  not to a response.
 - **Acquisition** (constrained expected improvement, Gardner et al. 2014, "Bayesian optimization
   with inequality constraints"): while nothing has matched, ``P(ok) P(match)``: every simulation
   goes to the match; once a set matched, ``P(ok) P(match) EI(log cost)`` below the cheapest
@@ -67,9 +75,14 @@ N_LOCAL = 512
 class Observation:
     """What one simulated parameter set told the search."""
 
-    n_remaining: tuple[int, ...]  # N_t of each successful replicate
+    n_remaining: tuple[int, ...]  # N_t (the first experiment's response) of each successful replicate
     cost: float  # f2 of the set (mean over replicates), > 0
     ok: bool  # False: the set failed (invalid, unstable, timeout, error): a constraint violation
+    responses: dict[str, tuple[float, ...]] = field(default_factory=dict)  # every experiment's
+
+    def values(self, rule: MatchRule) -> tuple[float, ...]:
+        """The replicates' values of the response ``rule`` judges (N_t when only that is known)."""
+        return tuple(self.responses[rule.response]) if self.responses else self.n_remaining
 
 
 @dataclass(frozen=True)
@@ -81,7 +94,8 @@ class MatchRule:
     tolerance: float
     aggregate: str = "median"  # "median" or "mean"
     distance: str = "aggregate"  # "aggregate" or "wasserstein"
-    n_items: int = 30
+    n_items: float = 30  # the response's value of a failed run: the largest a count can be
+    response: str = "n_remaining"
 
 
 def anscombe(n_remaining: np.ndarray) -> np.ndarray:
@@ -170,6 +184,35 @@ class ResponseModel:
         return self.cost.predict(genes, return_std=True)
 
 
+@dataclass
+class Models:
+    """One :class:`ResponseModel` per experiment (same order as the rules); the first carries the
+    feasibility and cost models, which belong to the run, not to a response."""
+
+    responses: list[ResponseModel]
+
+    @property
+    def size(self):
+        return self.responses[0].size
+
+    @property
+    def cost(self):
+        return self.responses[0].cost
+
+    def p_ok(self, genes: np.ndarray) -> np.ndarray:
+        return self.responses[0].p_ok(genes)
+
+    def log_cost(self, genes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.responses[0].log_cost(genes)
+
+    def p_match(self, genes: np.ndarray, rules: Sequence[MatchRule]) -> np.ndarray:
+        """P(every experiment matches): the product over experiments (independent models)."""
+        value = np.ones(len(genes))
+        for model, rule in zip(self.responses, rules, strict=True):
+            value = value * model.p_match(genes, rule)
+        return value
+
+
 def _kernel(n_genes: int, noise: bool):
     from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
@@ -220,15 +263,21 @@ def fit_classifier(genes: np.ndarray, labels: np.ndarray, random_state: int):
 
 
 def fit_models(
-    genes: np.ndarray, observations: Sequence[Observation], random_state: int, with_cost: bool = True
+    genes: np.ndarray,
+    observations: Sequence[Observation],
+    random_state: int,
+    with_cost: bool = True,
+    rule: MatchRule | None = None,
+    with_feasibility: bool = True,
 ) -> ResponseModel:
-    """Fit the clog, size, feasibility and (``with_cost``) cost models to everything observed."""
+    """Fit the clog and size models of ``rule``'s response (default: N_t), and the feasibility
+    (``with_feasibility``) and cost (``with_cost``) models, to everything observed."""
     ok = np.array([observation.ok for observation in observations], dtype=bool)
     runs = [
         (gene, n)
         for gene, observation in zip(genes, observations, strict=True)
         if observation.ok
-        for n in observation.n_remaining
+        for n in (observation.n_remaining if rule is None else observation.values(rule))
     ]
     x = np.array([gene for gene, _ in runs]).reshape(len(runs), genes.shape[1])
     counts = np.array([n for _, n in runs], dtype=float)
@@ -248,7 +297,7 @@ def fit_models(
         costs = np.log(np.array([max(observations[i].cost, 1e-300) for i in np.flatnonzero(ok)]))
         cost = fit_gp(genes[ok], costs, random_state)
     feasibility = None
-    if 0 < ok.sum() < len(ok):
+    if with_feasibility and 0 < ok.sum() < len(ok):
         feasibility = fit_classifier(genes, ok, random_state)
     return ResponseModel(clog, float(share), size, prior, noise, cost, feasibility, all_failed=not ok.any())
 
@@ -277,10 +326,14 @@ class SurrogateSearch:
     population: int
     offspring: int
     seed: int
-    rule: MatchRule
+    rule: MatchRule | tuple[MatchRule, ...]  # one per experiment (a bare rule: one experiment)
     genes: list[list[float]] = field(default_factory=list)
     observations: list[Observation] = field(default_factory=list)
     told: int = 0
+
+    @property
+    def rules(self) -> tuple[MatchRule, ...]:
+        return self.rule if isinstance(self.rule, tuple) else (self.rule,)
 
     def _rng(self) -> np.random.Generator:
         return np.random.default_rng([self.seed, self.told, 0x5EED])
@@ -333,37 +386,37 @@ class SurrogateSearch:
 
     # -- the model ------------------------------------------------------------------------------
 
-    def models(self, random_state: int | None = None) -> ResponseModel:
-        """The fitted models; the cost model only once a set matched (before, cost is not asked)."""
+    def models(self, random_state: int | None = None) -> Models:
+        """The fitted models, one per experiment; the cost model only once a set matched (before,
+        cost is not asked)."""
         state = int(self._rng().integers(2**31 - 1)) if random_state is None else random_state
-        return fit_models(np.array(self.genes), self.observations, state, with_cost=bool(self.matched()))
+        genes, with_cost = np.array(self.genes), bool(self.matched())
+        return Models(
+            [
+                fit_models(
+                    genes, self.observations, state, with_cost and k == 0, rule, with_feasibility=k == 0
+                )
+                for k, rule in enumerate(self.rules)
+            ]
+        )
 
     def matched(self) -> list[int]:
-        """Indices of observed sets whose replicates' f1 is within tolerance."""
-        from optimizer.study import aggregate
+        """Indices of observed sets whose replicates match every experiment within its tolerance."""
+        return [
+            index
+            for index, observation in enumerate(self.observations)
+            if observation.ok
+            and observation.n_remaining
+            and all(_distance(observation.values(rule), rule) <= rule.tolerance + 1e-9 for rule in self.rules)
+        ]
 
-        found = []
-        for index, observation in enumerate(self.observations):
-            if not observation.ok or not observation.n_remaining:
-                continue
-            values = list(observation.n_remaining)
-            if self.rule.distance == "wasserstein":
-                from scipy.stats import wasserstein_distance
-
-                f1 = wasserstein_distance(values, list(self.rule.measured))
-            else:
-                f1 = abs(aggregate(values, self.rule.aggregate) - self.rule.target)
-            if f1 <= self.rule.tolerance + 1e-9:
-                found.append(index)
-        return found
-
-    def acquisition(self, model: ResponseModel, candidates: np.ndarray) -> np.ndarray:
+    def acquisition(self, model: Models, candidates: np.ndarray) -> np.ndarray:
         """Constrained EI: P(match) on the sets the feasibility model calls valid (P(ok) >= 1/2),
         times the EI of log cost below the cheapest set the models believe matches, once one
         does. The threshold, not P(ok) as a factor: the cheap corner is where runs turn invalid
         (soft E), and a soft factor lets the cost's EI pull the batch across the boundary."""
         p_ok = model.p_ok(candidates)
-        value = np.where(p_ok >= 0.5, p_ok, 0.0) * model.p_match(candidates, self.rule)
+        value = np.where(p_ok >= 0.5, p_ok, 0.0) * model.p_match(candidates, self.rules)
         believed = self.believed_matches(model)
         if believed and model.cost is not None:
             best = min(np.log(self.observations[i].cost) for i in believed)
@@ -371,13 +424,13 @@ class SurrogateSearch:
             value = value * expected_improvement(mean, sd, best)
         return value
 
-    def believed_matches(self, model: ResponseModel) -> list[int]:
+    def believed_matches(self, model: Models) -> list[int]:
         """Observed sets that matched and that the models, which pool their neighbours' runs,
         also give P(match) >= 1/2: one lucky seed does not start the hunt for cheaper sets."""
         matched = self.matched()
         if not matched:
             return []
-        belief = model.p_match(np.array([self.genes[i] for i in matched]), self.rule)
+        belief = model.p_match(np.array([self.genes[i] for i in matched]), self.rules)
         return [index for index, p in zip(matched, belief, strict=True) if p >= 0.5]
 
     def candidates(self, rng: np.random.Generator) -> np.ndarray:
@@ -389,8 +442,15 @@ class SurrogateSearch:
         # Local moves around the sets nearest the target (or matching), where the band lies.
         closeness = []
         for i in ok:
-            values = self.observations[i].n_remaining
-            closeness.append(abs(float(np.median(values)) - self.rule.target) if values else np.inf)
+            observation = self.observations[i]
+            closeness.append(
+                max(
+                    abs(float(np.median(observation.values(rule))) - rule.target) / max(rule.tolerance, 1e-12)
+                    for rule in self.rules
+                )
+                if observation.n_remaining
+                else np.inf
+            )
         best = [ok[j] for j in np.argsort(closeness, kind="stable")[:8]]
         centres = observed[rng.choice(best, N_LOCAL)]
         local = np.clip(centres + rng.normal(0.0, 0.08, centres.shape), 0.0, 1.0)
@@ -425,6 +485,17 @@ class SurrogateSearch:
                 spacing, np.sqrt((((candidates - candidates[pick]) / scales) ** 2).sum(axis=1))
             )
         return candidates[chosen]
+
+
+def _distance(values: Sequence[float], rule: MatchRule) -> float:
+    """One experiment's f1 of observed replicate values (``objectives.experiment_distance``)."""
+    from optimizer.study import aggregate
+
+    if rule.distance == "wasserstein":
+        from scipy.stats import wasserstein_distance
+
+        return float(wasserstein_distance(list(values), list(rule.measured)))
+    return abs(aggregate(list(values), rule.aggregate) - rule.target)
 
 
 def _correlation(points: np.ndarray, centre: np.ndarray, scales: np.ndarray) -> np.ndarray:

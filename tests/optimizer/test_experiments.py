@@ -111,3 +111,33 @@ def test_a_failed_or_unmeasured_run_counts_as_every_responses_failed_value():
     # heap: |90 - 31| / 2 = 29.5 beats feeder |2 - 1| / 0.5 = 2.
     assert failed.f1 == unmeasured.f1 == pytest.approx(29.5)
     assert failed.failure.startswith("error") and unmeasured.failure
+
+
+def test_the_surrogate_search_calibrates_several_experiments():
+    """A heap and a feeder measured together: the surrogate models each response and the study
+    runs to its end (it used to be refused with several experiments)."""
+    from optimizer.driver import Driver
+    from optimizer.memory import MemoryStore, SyntheticExecutor
+
+    definition = combined_definition(
+        ga={"algorithm": "surrogate", "population": 6, "offspring": 3, "generations": 2},
+        validation={"seeds": 0},
+        seed=3,
+    )
+
+    def respond(spec):
+        mu, e = spec.params["mu"], spec.params["e"]
+        responses = {
+            "heap.angle_deg": 20.0 + 20.0 * mu,
+            "heap.height": 0.05,
+            "feeder.n_remaining": int(e < 0.5),
+        }
+        return SimulationResult(status=SimulationStatus.OK, responses=responses, wall_time_s=1.0, cost=1e6)
+
+    store = MemoryStore()
+    study_id = store.create_study(definition.model_dump(mode="json"))
+    progress = Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
+
+    trials = store.trials(study_id)
+    assert progress.status.value == "done" and len(trials) == 6 + 3 * 2
+    assert all(0.0 <= t.spec.params["mu"] <= 1.0 and 0.0 <= t.spec.params["e"] <= 1.0 for t in trials)

@@ -157,3 +157,36 @@ def test_surrogate_finds_a_true_match_in_fewer_simulations_than_random():
         found["random"].append(first_true_match(random, seed, budget) or budget + 10)
 
     assert sum(found["surrogate"]) < sum(found["random"]), found
+
+
+ANGLE = MatchRule(measured=(30.0, 32.0), target=31.0, tolerance=2.0, n_items=90.0, response="heap.angle_deg")
+COUNT = MatchRule(measured=(1, 1, 2), target=1.0, tolerance=0.5, n_items=2, response="feeder.n_remaining")
+
+
+def two_responses(genes: np.ndarray, rng: np.random.Generator) -> Observation:
+    """A heap's angle that grows with friction (gene 3) and a two-item feeder that keeps one item
+    where restitution (gene 2) is low: both experiments match only where mu ~ 0.55 and e < 0.5."""
+    angle = 20.0 + 20.0 * genes[3] + rng.normal(0.0, 0.5)
+    kept = int(genes[2] < 0.5) + int(rng.random() < 0.1)
+    responses = {"heap.angle_deg": (angle,), "feeder.n_remaining": (kept,)}
+    return Observation((angle,), 1e6 * (1.0 + genes[0]), True, responses)
+
+
+def test_several_experiments_get_a_model_each_and_match_only_together():
+    settings = GASettings(algorithm="surrogate", population=16, offspring=4)
+    search = create_search(settings, n_genes=4, seed=0, rule=(ANGLE, COUNT))
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        genes = search.ask()
+        observations = [two_responses(gene, rng) for gene in genes]
+        search.tell(genes, np.zeros((len(genes), 2)), observations=observations)
+
+    model = search.models(random_state=0)
+    # Both match / only the angle (the feeder empties) / only the count (the heap is too steep).
+    probe = np.array([[0.5, 0.5, 0.2, 0.55], [0.5, 0.5, 0.8, 0.55], [0.5, 0.5, 0.2, 0.95]])
+    both, angle_only, count_only = model.p_match(probe, search.rules)
+    assert len(model.responses) == 2
+    assert both > 0.5 > max(angle_only, count_only)
+    for index in search.matched():
+        observation = search.observations[index]
+        assert abs(observation.values(ANGLE)[0] - 31.0) <= 2.0 and observation.values(COUNT) == (1,)
