@@ -119,6 +119,7 @@ class MemoryStore:
             record.result = outcome.result
             record.state = TrialState.DONE
             record.worker = outcome.worker
+            record.attempts += outcome.retries
             self._touch(outcome.trial_id)
             return True
 

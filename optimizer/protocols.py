@@ -79,6 +79,9 @@ class TrialOutcome:
     trial_id: str
     result: SimulationResult
     worker: str | None = None
+    # Runs of this submission that failed before the one reported (the executor's own retries
+    # of infrastructure failures: a worker killed or lost); the store adds them to ``attempts``.
+    retries: int = 0
 
 
 @dataclass

@@ -378,6 +378,7 @@ class RqExecutor:
                     trial_id=envelope["trial_id"],
                     result=SimulationResult.model_validate(envelope["result"]),
                     worker=envelope.get("worker"),
+                    retries=max(int(envelope.get("attempt", 1)) - 1, 0),
                 )
             )
         return outcomes
@@ -426,4 +427,5 @@ class RqExecutor:
                 seed=spec.get("seed", 0),
             ),
             worker=job.worker_name,
+            retries=attempts - 1,
         )

@@ -111,6 +111,7 @@ def deliver(
             "trial_id": spec["trial_id"],
             "study_id": spec["study_id"],
             "worker": job.worker_name,
+            "attempt": attempt(job),
             "result": result,
         }
     )

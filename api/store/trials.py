@@ -121,6 +121,7 @@ class TrialStore(StoreBase):
         values = result_columns(result) | {
             "state": TrialState.DONE.value, "cost": result.cost, "dt": result.dt,
             "message": result.message, "finished_at": now, "updated_at": now,
+            "attempts": TrialRow.attempts + outcome.retries,
         }
         if outcome.worker is not None:
             values["worker"] = outcome.worker

@@ -174,6 +174,19 @@ def test_queue_bookkeeping_counts_attempts_and_requeues_lost_trials(store):
     assert (record.state, record.attempts, record.worker) == (TrialState.QUEUED, 2, "w1")
 
 
+def test_a_result_after_the_executors_retries_counts_them_as_attempts(store):
+    study_id = store.create_study(_definition(), owner=None)
+    spec = _specs(study_id, 1)[0]
+    store.add_trials([spec])
+    store.mark_queued([spec.trial_id])
+
+    store.record_result(TrialOutcome(spec.trial_id, _result(3), worker="w2", retries=1))
+    store.record_result(TrialOutcome(spec.trial_id, _result(3), worker="w3", retries=1))  # a late duplicate
+
+    [record] = store.trials(study_id)
+    assert (record.state, record.attempts, record.worker) == (TrialState.DONE, 2, "w2")
+
+
 def test_cancelling_a_study_cancels_its_waiting_trials(store):
     study_id = store.create_study(_definition(), owner=None)
     specs = _specs(study_id, 2)

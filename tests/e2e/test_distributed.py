@@ -134,6 +134,9 @@ def test_a_worker_killed_mid_trial_loses_no_trial_and_counts_none_twice(cluster)
     assert study["status"] == "done", study["message"]
     trials = {trial["id"]: trial for trial in assert_every_trial_has_exactly_one_result(cluster, study_id)}
     assert trials[killed_trial]["worker"] == "w2"
+    # The API counts the run on w1 that never delivered: the trial took two attempts.
+    assert trials[killed_trial]["attempts"] == 2
+    assert {trial["attempts"] for trial_id, trial in trials.items() if trial_id != killed_trial} == {1}
     assert_result_equals_a_clean_run(cluster, study_id, killed_trial)
 
 

@@ -29,7 +29,7 @@ from worker.rq_executor import (
     RqExecutor,
     job_timeout,
 )
-from worker.rq_job import CancellationCheck, deliver, results_key
+from worker.rq_job import CancellationCheck, attempt, deliver, results_key
 from worker.runner import build_worker
 
 pytestmark = pytest.mark.redis
@@ -40,8 +40,10 @@ QUEUE = "demcal-test"
 def stand_in_trial(spec: dict) -> dict:
     """A job that does what the scenario's ``behaviour`` says, through the real delivery path."""
     behaviour = spec["scenario"].get("behaviour", "ok")
-    if behaviour == "raise":
+    if behaviour == "raise" or (behaviour == "raise once" and attempt(get_current_job()) == 1):
         raise OSError("scratch disk full")
+    if behaviour == "raise once":
+        behaviour = "ok"
     if behaviour == "run until cancelled":
         should_stop = CancellationCheck(get_current_job(), spec["trial_id"], every_s=0.1)
         deadline = time.monotonic() + 30
@@ -181,6 +183,39 @@ def test_a_job_that_keeps_failing_is_retried_then_reported_as_an_error(executor,
     assert "scratch disk full" in result.message
     assert result.seed == spec.seed
     assert executor.poll() == []
+
+
+def test_a_retried_job_reports_its_failed_runs_and_the_store_counts_them_as_attempts(
+    executor, connection
+):
+    from optimizer.memory import MemoryStore
+
+    spec = make_spec("s1", 0, behaviour="raise once")
+    clean = make_spec("s1", 1)
+    store = MemoryStore()
+    store.add_trials([spec, clean])
+    store.mark_queued([spec.trial_id, clean.trial_id])
+    executor.submit([spec, clean])
+
+    run_worker_until_empty(connection)
+    outcomes = {outcome.trial_id: outcome for outcome in executor.poll(timeout=1.0)}
+    for outcome in outcomes.values():
+        store.record_result(outcome)
+
+    assert outcomes[spec.trial_id].result.status is SimulationStatus.OK
+    assert (outcomes[spec.trial_id].retries, outcomes[clean.trial_id].retries) == (1, 0)
+    attempts = {record.spec.trial_id: record.attempts for record in store.trials("s1")}
+    assert attempts == {spec.trial_id: 2, clean.trial_id: 1}
+
+
+def test_a_job_failing_for_good_reports_every_run_as_an_attempt(executor, connection):
+    spec = make_spec("s1", 0, behaviour="raise")
+    executor.submit([spec])
+
+    run_worker_until_empty(connection)
+    [outcome] = executor.poll()
+
+    assert outcome.retries == 2
 
 
 def test_a_failed_trial_submitted_again_runs_again(executor, connection):
