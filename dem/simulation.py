@@ -254,6 +254,10 @@ class Simulation:
         """Vertices of wall k at time t (now by default)."""
         return self.walls[k].vertices + self.wall_displacement(k, t)
 
+    def shape(self, b: int) -> Clump | Polyhedron:
+        """The clump or polyhedron body ``b`` was added as."""
+        return self._clumps[int(self.bodies.clump_type[b])]
+
     def sphere_positions(self) -> np.ndarray:
         """World sphere centres (recomputed from body poses)."""
         b = self.spheres.body

@@ -201,7 +201,7 @@ def run_feeder(
     is a ``time.monotonic()`` value; ``should_stop()`` is polled between chunks; ``progress`` is
     called with (simulated time, items not yet discharged); ``snapshot_dir`` receives the files
     ``demcal render`` reads (see ``dem/scenarios/render.py``); ``vtk_dir`` receives ParaView files
-    (``spheres_NNNNN.vtk``, ``walls_NNNNN.vtk``) every ``run.snapshot_interval``, from ``dem/vtk.py``.
+    (``dem.vtk.write_frame``) every ``run.snapshot_interval``.
     """
     started = time.monotonic()
     checked, problem = merged_params(config.params, params)
@@ -398,8 +398,7 @@ class _FeederRun:
         if self.vtk_dir is not None:
             from dem import vtk
 
-            vtk.write_spheres(self.sim, self.vtk_dir / f"spheres_{self.vtk_frames:05d}.vtk")
-            vtk.write_walls(self.sim, self.vtk_dir / f"walls_{self.vtk_frames:05d}.vtk")
+            vtk.write_frame(self.sim, self.vtk_dir, self.vtk_frames)
             self.vtk_frames += 1
         if self.writer is None:
             return

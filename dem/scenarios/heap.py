@@ -339,8 +339,7 @@ class _HeapRun:
         if vtk_dir is not None and sim.t >= self.next_frame - 1e-12:
             from dem import vtk
 
-            vtk.write_spheres(sim, vtk_dir / f"spheres_{self.frames:05d}.vtk")
-            vtk.write_walls(sim, vtk_dir / f"walls_{self.frames:05d}.vtk")
+            vtk.write_frame(sim, vtk_dir, self.frames)
             self.frames += 1
             self.next_frame = sim.t + self.config.run.snapshot_interval
         if self.control.progress is not None:
