@@ -61,8 +61,10 @@ CSV_COLUMNS = (
 )
 
 
-def first_match(records: list[TrialRecord], definition: StudyDefinition) -> int | None:
-    """Simulations run until a set first matched the experiment, or None.
+def first_match(
+    records: list[TrialRecord], definition: StudyDefinition, among: set[int] | None = None
+) -> int | None:
+    """Simulations run until a set (of ``among``, default any) first matched the experiment, or None.
 
     Runs are counted in the order the driver creates them: batch by batch, and within a batch by
     individual and replicate. A set counts as matching on the runs it had at that point, so the
@@ -88,7 +90,8 @@ def first_match(records: list[TrialRecord], definition: StudyDefinition) -> int 
             record.spec.individual,
         ):
             continue  # the set's runs of this batch are not all counted yet
-        if record.spec.individual in unfinished:
+        individual = record.spec.individual
+        if individual in unfinished or (among is not None and individual not in among):
             continue
         evaluation = evaluate(so_far[record.spec.individual], definition, n_items)
         if evaluation and evaluation[0].matches(tolerance):
