@@ -288,13 +288,11 @@ def build_executor(settings: Settings) -> Any:
     if settings.redis_url:
         from worker.rq_executor import RqExecutor
 
-        return RqExecutor.from_url(settings.redis_url, settings.queue_name)
-    from dem.scenarios.paths import mesh_root
+        return RqExecutor.from_url(settings.redis_url, settings.queue_name, data_dir=settings.data_dir)
     from worker.local import LocalPoolExecutor
 
     return LocalPoolExecutor(
-        workers=settings.workers, snapshot_root=settings.data_dir / "snapshots",
-        mesh_root=mesh_root(settings.data_dir),
+        workers=settings.workers, snapshot_root=settings.data_dir / "snapshots", data_dir=settings.data_dir
     )
 
 

@@ -31,13 +31,13 @@ def run_trial(
     should_stop: Callable[[], bool] | None = None,
     progress: Callable[[float, int], None] | None = None,
     snapshot_root: Path | None = None,
-    mesh_root: Path | None = None,
+    data_dir: Path | None = None,
 ) -> dict[str, Any]:
     """Run one simulation for ``spec``; returns ``SimulationResult.model_dump(mode="json")``.
 
     With ``spec["keep_snapshots"]`` and a ``snapshot_root`` (the worker's data dir), the run's
     snapshots go to ``snapshot_root/<trial id>/``, where the dashboard's replay reads them.
-    Relative mesh paths in the scenario are this process's files in ``mesh_root``
+    The meshes the scenario names are this process's files in ``data_dir``
     (``dem/scenarios/paths.py``).
     """
     started = time.monotonic()
@@ -49,7 +49,7 @@ def run_trial(
         from dem.scenarios.paths import resolve_paths
         from dem.scenarios.registry import for_config
 
-        config = resolve_paths(spec["scenario"], mesh_root)
+        config = resolve_paths(spec["scenario"], data_dir)
         scenario = for_config(config)
         timeout_s = spec.get("timeout_s")
         control = RunControl(
@@ -90,7 +90,7 @@ def _floats(params: dict[str, Any]) -> dict[str, float]:
     return clean
 
 
-def longest_first(specs: Sequence[Any]) -> list[Any]:
+def longest_first(specs: Sequence[Any], data_dir: Path | None = None) -> list[Any]:
     """Trial specs in the order executors should start them: the largest estimated cost first.
 
     The scenario estimates each trial's body-steps (``Scenario.cost_estimate``): the automatic
@@ -99,16 +99,19 @@ def longest_first(specs: Sequence[Any]) -> list[Any]:
     the other workers idle. Equal estimates (a forced step) go stiffest first, as before.
     """
     def key(spec: Any) -> tuple[float, float]:
-        return -estimated_cost(spec.scenario, spec.params), -float(spec.params.get("E", 0.0))
+        return -estimated_cost(spec.scenario, spec.params, data_dir), -float(spec.params.get("E", 0.0))
 
     return sorted(specs, key=key)
 
 
-def estimated_cost(scenario: dict[str, Any], params: dict[str, float]) -> float:
-    """The scenario's body-steps estimate; 0 for a config that does not validate (it will fail fast)."""
+def estimated_cost(scenario: dict[str, Any], params: dict[str, float], data_dir: Path | None = None) -> float:
+    """The scenario's body-steps estimate, with its meshes from ``data_dir``; 0 for a config that
+    does not validate (it will fail fast) or whose meshes are not here."""
+    from dem.scenarios.paths import resolve_paths
     from dem.scenarios.registry import for_config
 
     try:
-        return for_config(scenario).cost_estimate(scenario, params)
+        config = resolve_paths(scenario, data_dir)
+        return for_config(config).cost_estimate(config, params)
     except Exception:
         return 0.0

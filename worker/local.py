@@ -53,7 +53,7 @@ WARMUP_ALLOWANCE_S = 120.0
 MAX_WAIT_S = 0.5
 
 
-def _serve(conn, log_level: int, snapshot_root: Path | None, mesh_root: Path | None) -> None:
+def _serve(conn, log_level: int, snapshot_root: Path | None, data_dir: Path | None) -> None:
     """A worker process: run the specs it receives until told to stop (None) or its pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # A spawned process starts with no logging set up; give the engine's records the parent's
@@ -72,7 +72,7 @@ def _serve(conn, log_level: int, snapshot_root: Path | None, mesh_root: Path | N
             return
         if spec is None:
             return
-        conn.send((spec["trial_id"], run_trial(spec, snapshot_root=snapshot_root, mesh_root=mesh_root)))
+        conn.send((spec["trial_id"], run_trial(spec, snapshot_root=snapshot_root, data_dir=data_dir)))
 
 
 @dataclass
@@ -99,11 +99,11 @@ class LocalPoolExecutor:
 
     def __init__(
         self, workers: int = 0, *, grace_s: float = DEFAULT_GRACE_S, snapshot_root: Path | None = None,
-        mesh_root: Path | None = None,
+        data_dir: Path | None = None,
     ):
         self.size = workers or os.cpu_count() or 1
         self.snapshot_root = snapshot_root
-        self.mesh_root = mesh_root
+        self.data_dir = data_dir
         self.grace_s = grace_s
         self._context = get_context("spawn")
         self._slots: list[_Slot] = []
@@ -113,7 +113,7 @@ class LocalPoolExecutor:
 
     def submit(self, specs: Sequence[TrialSpec]) -> None:
         known = self.in_flight()
-        for spec in longest_first(specs):
+        for spec in longest_first(specs, self.data_dir):
             if spec.trial_id not in known:
                 self._waiting.append(spec)
                 known.add(spec.trial_id)
@@ -191,7 +191,7 @@ class LocalPoolExecutor:
         parent, child = self._context.Pipe()
         process = self._context.Process(
             target=_serve,
-            args=(child, logging.getLogger().getEffectiveLevel(), self.snapshot_root, self.mesh_root),
+            args=(child, logging.getLogger().getEffectiveLevel(), self.snapshot_root, self.data_dir),
             daemon=True,
             name="demcal-local-worker",
         )

@@ -38,6 +38,7 @@ import logging
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
 from redis import Redis
@@ -82,14 +83,14 @@ class RedisQueueError(RuntimeError):
     """Redis cannot be reached or refused the queue's commands; the message says which URL."""
 
 
-def job_timeout(spec: TrialSpec) -> int:
+def job_timeout(spec: TrialSpec, data_dir: Path | None = None) -> int:
     """Seconds after which RQ kills the job: the spec's deadline with a margin, or an estimate
     from simulated duration x steps per second x items, bounded by a floor and a ceiling."""
     if spec.timeout_s:
         seconds = spec.timeout_s * DEADLINE_MARGIN + DEADLINE_GRACE_S
     else:
         # The scenario's body-steps estimate (bodies x steps, from its own time step estimate).
-        seconds = TIMEOUT_SAFETY * estimated_cost(spec.scenario, spec.params) * STEP_COST_PER_ITEM_S
+        seconds = TIMEOUT_SAFETY * estimated_cost(spec.scenario, spec.params, data_dir) * STEP_COST_PER_ITEM_S
     return int(min(MAX_JOB_TIMEOUT_S, max(MIN_JOB_TIMEOUT_S, seconds)))
 
 
@@ -128,6 +129,7 @@ class RqExecutor:
         *,
         job_function: str = JOB_FUNCTION,
         max_retries: int = MAX_RETRIES,
+        data_dir: Path | None = None,
     ) -> None:
         self._redis = connection
         self._queue = Queue(queue_name, connection=connection, serializer=JSONSerializer)
@@ -141,6 +143,7 @@ class RqExecutor:
         self._waiting: dict[str, str] = {}
         self._job_function = job_function
         self._max_retries = max_retries
+        self._data_dir = data_dir  # the service's: its meshes size the trials' estimates
         self._watched: set[str] = set()
         # Trials reported since they were last submitted: a late duplicate result is dropped.
         self._reported: set[str] = set()
@@ -176,7 +179,7 @@ class RqExecutor:
         self.watch(spec.study_id for spec in specs)
         statuses = self._job_statuses([spec.trial_id for spec in specs])
         fresh = longest_first(
-            [spec for spec in specs if statuses.get(spec.trial_id) not in ACTIVE_STATES]
+            [spec for spec in specs if statuses.get(spec.trial_id) not in ACTIVE_STATES], self._data_dir
         )
         if not fresh:
             return
@@ -191,7 +194,7 @@ class RqExecutor:
                         self._job_function,
                         args=(spec_to_payload(spec),),
                         job_id=spec.trial_id,
-                        timeout=job_timeout(spec),
+                        timeout=job_timeout(spec, self._data_dir),
                         result_ttl=RESULT_TTL_S,
                         failure_ttl=FAILURE_TTL_S,
                         description=f"demcal trial {spec.trial_id}",

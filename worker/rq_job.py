@@ -146,7 +146,7 @@ def attempt(job: Job) -> int:
 # meshes a scenario names (set by ``run_worker`` from the worker's data dir; None: none kept, and
 # relative mesh paths are taken from the working directory).
 SNAPSHOT_ROOT: Path | None = None
-MESH_ROOT: Path | None = None
+DATA_DIR: Path | None = None
 
 
 def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
@@ -176,7 +176,7 @@ def perform_trial(spec: dict[str, Any]) -> dict[str, Any]:
         should_stop=CancellationCheck(job, spec["trial_id"]),
         progress=ProgressLog(spec["trial_id"], end),
         snapshot_root=SNAPSHOT_ROOT,
-        mesh_root=MESH_ROOT,
+        data_dir=DATA_DIR,
     )
     deliver(job, spec, result)
     logger.info(

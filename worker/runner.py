@@ -177,7 +177,7 @@ def run_worker(
     heartbeat_s: int = DEFAULT_HEARTBEAT_S,
     log_level: str = "INFO",
     snapshot_root: Path | None = None,
-    mesh_root: Path | None = None,
+    data_dir: Path | None = None,
 ) -> bool:
     """Work until told to stop (or, with ``burst``, until the queues are empty).
 
@@ -186,7 +186,7 @@ def run_worker(
     from worker import rq_job
 
     rq_job.SNAPSHOT_ROOT = snapshot_root
-    rq_job.MESH_ROOT = mesh_root
+    rq_job.DATA_DIR = data_dir
     connection = connect(redis_url)
     preload()
     base_name = name or worker_name()

@@ -34,7 +34,6 @@ def register(app: typer.Typer) -> None:
         SIGTERM abandons it (the service runs it again) and exits 1."""
         from api.settings import get_settings
         from dem.engines.base import available_engines
-        from dem.scenarios.paths import mesh_root
         from worker.rq_executor import engine_queues
         from worker.runner import COLD_STOP_EXIT_CODE, ColdStop, WorkerSetupError, run_worker
 
@@ -50,7 +49,7 @@ def register(app: typer.Typer) -> None:
                 heartbeat_s=heartbeat,
                 log_level=settings.log_level,
                 snapshot_root=settings.data_dir / "snapshots",
-                mesh_root=mesh_root(settings.data_dir),
+                data_dir=settings.data_dir,
             )
         except WorkerSetupError as exc:
             typer.secho(f"error: {exc}", err=True, fg="red")

@@ -48,5 +48,5 @@ def get_shape(shape_id: str, principal: ApiKeyDep, store: StoreDep):
 
 
 @router.delete("/{shape_id}", status_code=status.HTTP_204_NO_CONTENT, response_class=Response)
-def delete_shape(shape_id: str, principal: ApiKeyDep, store: StoreDep):
-    shapes.delete_shape(store, shape_id, principal)
+def delete_shape(shape_id: str, principal: ApiKeyDep, store: StoreDep, settings: SettingsDep):
+    shapes.delete_shape(store, settings, shape_id, principal)

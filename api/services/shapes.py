@@ -3,7 +3,9 @@
 The bytes are parsed by ``dem.mesh.load_mesh`` with an allow-listed type taken from the file
 name's extension (never a path the user sent; archives refused), within the configured byte and
 face limits. A mesh that fails validation is a 422 whose message is ``dem``'s own: it says what
-to fix. The stored shape keeps the original bytes, the validation report and a clump summary.
+to fix. The stored shape keeps the original bytes, the validation report and a clump summary;
+the validated mesh, in metres, is also kept where workers read it
+(``dem.scenarios.paths.shape_file``), so a scenario can feed it by id (``items.uploaded``).
 """
 
 from __future__ import annotations
@@ -11,14 +13,17 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
-from pathlib import PurePath
+import os
+from pathlib import Path, PurePath
+from typing import Any
 
 from api.auth import Principal
-from api.errors import InvalidInputError, PayloadTooLargeError
+from api.errors import InvalidInputError, NotFoundError, PayloadTooLargeError
 from api.models import ShapeRow
 from api.schemas import ShapePage, ShapeRead
 from api.settings import Settings
 from api.store import SqlStore, new_id
+from dem.scenarios.paths import shape_file
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +69,7 @@ def upload_shape(
         n_bytes=len(data), sha256=hashlib.sha256(data).hexdigest(), data=data,
         report=report.to_dict(), clump=summary,
     )
+    _keep_for_workers(mesh, shape_file(settings.data_dir, row.id))
     store.add_shape(row)
     log.info("shape %s (%s, %d faces) stored for %s", row.id, suffix, report.n_faces, principal.owner)
     return ShapeRead.model_validate(row)
@@ -81,6 +87,42 @@ def list_shapes(store: SqlStore, principal: Principal, limit: int, offset: int) 
     )
 
 
-def delete_shape(store: SqlStore, shape_id: str, principal: Principal) -> None:
+def delete_shape(store: SqlStore, settings: Settings, shape_id: str, principal: Principal) -> None:
     store.get_shape(shape_id, principal.visible_to)
     store.delete_shape(shape_id)
+    shape_file(settings.data_dir, shape_id).unlink(missing_ok=True)
+
+
+def _keep_for_workers(mesh, path: Path) -> None:
+    """Write the validated mesh (metres) where workers read it; whole or not at all."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_suffix(".partial")
+    mesh.export(partial, file_type="ply")
+    os.replace(partial, path)
+
+
+def attach_uploaded_shapes(
+    store: SqlStore, principal: Principal, scenario: dict[str, Any], data_dir: Path
+) -> dict[str, Any]:
+    """A scenario feeding uploaded shapes (``items.uploaded``), checked: every id in
+    ``items.counts`` is a shape of this key's owner, kept where workers read it; their masses are
+    the uploads' own. 422 otherwise, naming the id."""
+    items = scenario.get("items")
+    if not isinstance(items, dict) or not items.get("uploaded"):
+        return scenario
+    masses = dict(items.get("masses") or {})
+    for shape_id in items.get("counts") or {}:
+        try:
+            row = store.get_shape(shape_id, principal.visible_to)
+        except NotFoundError:
+            raise InvalidInputError(
+                f"scenario.items.counts: no uploaded shape {shape_id!r} of yours; with uploaded = true "
+                "the counts name shapes by id (list them with GET /api/v1/shapes)"
+            ) from None
+        if not shape_file(data_dir, shape_id).is_file():
+            raise InvalidInputError(
+                f"scenario.items.counts: shape {shape_id!r} was uploaded before shapes could be fed by id; "
+                "upload its mesh again (POST /api/v1/shapes) and use the new id"
+            )
+        masses[shape_id] = row.mass
+    return {**scenario, "items": {**items, "masses": masses}}

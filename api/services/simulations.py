@@ -12,6 +12,7 @@ from api.auth import Principal
 from api.errors import InvalidInputError
 from api.schemas import SimulationCreate, SimulationPage, SimulationRead
 from api.services.scenario_paths import confine_paths
+from api.services.shapes import attach_uploaded_shapes
 from api.store import SqlStore
 
 
@@ -30,7 +31,7 @@ def create_simulation(
         raise InvalidInputError(f"engine: {exc}") from None
     if problem:
         raise InvalidInputError(f"engine: {problem}")
-    scenario = confine_paths(scenario, data_dir)
+    scenario = attach_uploaded_shapes(store, principal, confine_paths(scenario, data_dir), data_dir)
     sim_id = store.create_simulation(
         scenario, dict(request.params), request.seed, principal.owner, timeout_s=request.timeout_s,
         engine=request.engine,

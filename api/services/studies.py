@@ -20,6 +20,7 @@ from api.errors import ConflictError, InvalidInputError
 from api.schemas import Failures, Progress, ResponseRead, StudyListItem, StudyPage, StudyRead
 from api.services.generations import latest_generation
 from api.services.scenario_paths import confine_paths
+from api.services.shapes import attach_uploaded_shapes
 from api.services.trials import trial_read
 from api.store import SqlStore
 from optimizer.outcomes import failures_from_counts
@@ -44,7 +45,9 @@ def create_study(
     except StudyLimitError as exc:
         raise InvalidInputError(str(exc)) from None
     document = definition.model_dump(mode="json")
-    document["scenario"] = confine_paths(document["scenario"], data_dir)
+    document["scenario"] = attach_uploaded_shapes(
+        store, principal, confine_paths(document["scenario"], data_dir), data_dir
+    )
     study_id = store.create_study(document, owner=principal.owner, warnings=study_warnings(definition))
     return get_study(store, study_id, principal)
 

@@ -52,11 +52,13 @@ INLET_PACKING_LIMIT = 0.6
 
 
 class ItemsConfig(Section):
-    """Which items are fed: the built-in WEEE set, or the user's meshes from a folder."""
+    """Which items are fed: the built-in WEEE set, the user's meshes from a folder, or shapes
+    uploaded to the service (``uploaded``)."""
 
     counts: dict[str, int] = Field(
         default_factory=lambda: {"smartphone": 10, "feature_phone": 10, "camera": 10},
-        description="Items per kind (built-in kinds, or file stems of the folder's meshes).",
+        description="Items per kind (built-in kinds, file stems of the folder's meshes, or uploaded "
+        "shape ids with uploaded = true).",
     )
     spread: float = Field(0.05, ge=0, le=0.3, description="Relative random spread of dimensions and mass.")
     representation: Literal["polyhedron", "clump"] = Field(
@@ -65,7 +67,12 @@ class ItemsConfig(Section):
     )
     resolution: int = Field(12, ge=1, le=400, description="Clump resolution passed to the clump generator.")
     folder: Path | None = Field(None, description="Folder of STL/OBJ item meshes instead of the built-ins.")
-    masses: dict[str, float] = Field(default_factory=dict, description="Mass per folder mesh stem, kg.")
+    masses: dict[str, float] = Field(
+        default_factory=dict, description="Mass per folder mesh stem, kg (an uploaded shape's is its own)."
+    )
+    uploaded: bool = Field(
+        False, description="counts name shapes uploaded to the service (POST /api/v1/shapes) by id."
+    )
 
     @model_validator(mode="after")
     def _counts_positive(self) -> ItemsConfig:
@@ -74,6 +81,8 @@ class ItemsConfig(Section):
                 raise ValueError(f"counts.{kind} is {count}; counts cannot be negative")
         if sum(self.counts.values()) == 0:
             raise ValueError("counts: at least one item is needed")
+        if self.uploaded and self.folder is not None:
+            raise ValueError("give either folder (meshes in a folder) or uploaded = true (shapes by id)")
         return self
 
 
@@ -143,7 +152,7 @@ class FeederConfig(Section):
 
     @model_validator(mode="after")
     def _items_fit_the_inlet(self) -> FeederConfig:
-        if self.items.folder is not None:
+        if self.items.folder is not None or self.items.uploaded:
             return self  # user meshes are measured when they are loaded
         from dem.scenarios.items import nominal_volume
 
@@ -531,6 +540,10 @@ def make_items(config: ItemsConfig, rng: np.random.Generator) -> list:
     """The items of one run, in a fixed order (kind by kind), with their per-item spread."""
     from dem.scenarios import items
 
+    if config.uploaded:
+        raise items.ItemsError(
+            "items.uploaded: uploaded shapes are kept by the service; run the scenario through its API"
+        )
     if config.folder is not None:
         return items.items_from_folder(
             config.folder,

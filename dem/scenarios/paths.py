@@ -1,11 +1,15 @@
-"""The files a scenario config names, and where a worker finds them: its own mesh directory.
+"""The files a scenario config names, and where a worker finds them: in its own data directory.
 
 A scenario's ``tray.mesh_file`` and ``items.folder`` name files the engine opens. A scenario sent
 through the API names them relative to the mesh directory (``$DEMCAL_DATA_DIR/meshes``) and is
-stored so; each process that runs a trial resolves them against *its own* mesh directory
+stored so; each process that runs a trial resolves them against *its own* data directory
 (``resolve_paths``), so a worker on another machine reads its copy (or a shared volume) and never
 a path of the server's. An absolute path (a local ``demcal calibrate`` or ``simulate`` reading
 the user's own files) is used as it is.
+
+Shapes uploaded to the service (``items.uploaded``: ``items.counts`` names them by id) are
+kept as ``$DEMCAL_DATA_DIR/shapes/<id>.ply`` in metres, outside the mesh directory so that no
+scenario can name another owner's shape by path; for the engine they are a folder of meshes.
 
 Must not: open the files; the scenario does that, and says what is wrong with them.
 """
@@ -16,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 MESH_SUBDIR = "meshes"
+SHAPES_SUBDIR = "shapes"
 # (section, field) of every path a scenario config may hold.
 SCENARIO_PATHS = (("tray", "mesh_file"), ("items", "folder"))
 
@@ -29,17 +34,24 @@ def mesh_root(data_dir: Path | str) -> Path:
     return (Path(data_dir) / MESH_SUBDIR).resolve()
 
 
+def shape_file(data_dir: Path | str, shape_id: str) -> Path:
+    """Where an uploaded shape's mesh (metres) is kept for the engine."""
+    return Path(data_dir).resolve() / SHAPES_SUBDIR / f"{shape_id}.ply"
+
+
 def inside(root: Path, given: str) -> Path | None:
     """``given`` resolved against ``root`` if it stays inside it, else None."""
     resolved = (root / given).resolve()  # an absolute ``given`` replaces the root
     return resolved if "\x00" not in given and resolved.is_relative_to(root) else None
 
 
-def resolve_paths(scenario: dict[str, Any], root: Path | None) -> dict[str, Any]:
-    """The scenario with its relative paths resolved inside ``root`` (a copy; absolute paths kept).
-    With no ``root``, relative paths stay relative to the working directory."""
-    if root is None:
+def resolve_paths(scenario: dict[str, Any], data_dir: Path | None) -> dict[str, Any]:
+    """The scenario with its relative paths resolved inside ``data_dir``'s mesh directory and its
+    uploaded shapes as the folder that holds them (a copy; absolute paths kept). With no
+    ``data_dir``, relative paths stay relative to the working directory."""
+    if data_dir is None:
         return scenario
+    root = mesh_root(data_dir)
     resolved = dict(scenario)
     for section, field in SCENARIO_PATHS:
         values = scenario.get(section)
@@ -50,4 +62,8 @@ def resolve_paths(scenario: dict[str, Any], root: Path | None) -> dict[str, Any]
         if path is None:
             raise ScenarioPathError(f"{section}.{field} {given!r} leaves the mesh directory {root}")
         resolved[section] = {**values, field: str(path)}
+    items = resolved.get("items")
+    if isinstance(items, dict) and items.get("uploaded"):
+        folder = shape_file(data_dir, "-").parent
+        resolved["items"] = {**items, "uploaded": False, "folder": str(folder)}
     return resolved

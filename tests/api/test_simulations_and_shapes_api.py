@@ -10,6 +10,10 @@ import trimesh
 from dem.result import SimulationResult, SimulationStatus
 
 PARAMS = {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.4}
+STUDY = {
+    "name": "uploaded", "experiment": {"measured": [2, 2, 3]}, "parameters": {"E": {"low": 1e6, "high": 1e7}},
+    "ga": {"population": 4, "offspring": 2, "generations": 1},
+}
 
 
 def _box_stl() -> bytes:
@@ -114,3 +118,56 @@ def test_upload_above_the_byte_limit_is_413(client, keys):
     )
 
     assert response.status_code == 413
+
+
+def _upload_box(client, keys, who="alice", mass="0.15") -> str:
+    response = client.post(
+        "/api/v1/shapes", files={"file": ("phone.stl", _box_stl(), "model/stl")},
+        data={"mass": mass, "n_spheres": "4"}, headers=keys.auth(who),
+    )
+    assert response.status_code == 201, response.text
+    return response.json()["id"]
+
+
+def test_a_scenario_feeds_uploaded_shapes_by_id_with_their_own_mass(client, keys, settings):
+    shape_id = _upload_box(client, keys, mass="0.15")
+    items = {"uploaded": True, "counts": {shape_id: 2}, "masses": {shape_id: 99.0}}
+
+    created = client.post(
+        "/api/v1/simulations", json={"scenario": {"items": items}, "params": PARAMS}, headers=keys.auth()
+    )
+
+    assert created.status_code == 202, created.text
+    stored = created.json()["scenario"]["items"]
+    assert (stored["uploaded"], stored["counts"], stored["masses"]) == (True, {shape_id: 2}, {shape_id: 0.15})
+    assert "folder" not in stored or stored["folder"] is None  # no server path in the scenario
+    kept = trimesh.load(settings.data_dir / "shapes" / f"{shape_id}.ply", force="mesh")
+    assert sorted(kept.extents) == pytest.approx(sorted((0.14, 0.07, 0.01)))
+
+
+def test_a_shape_of_another_owner_or_none_is_422_naming_the_id(client, keys, settings):
+    bobs = _upload_box(client, keys, who="bob")
+
+    for shape_id in (bobs, "sh-000000000000"):
+        items = {"uploaded": True, "counts": {shape_id: 2}}
+        study = client.post(
+            "/api/v1/studies", json={**STUDY, "scenario": {"items": items}}, headers=keys.auth()
+        )
+        single = client.post(
+            "/api/v1/simulations", json={"scenario": {"items": items}, "params": PARAMS}, headers=keys.auth()
+        )
+
+        for response in (study, single):
+            assert response.status_code == 422, response.text
+            assert f"no uploaded shape {shape_id!r} of yours" in response.json()["detail"]
+
+
+def test_deleting_a_shape_removes_the_mesh_kept_for_workers(client, keys, settings):
+    shape_id = _upload_box(client, keys)
+    kept = settings.data_dir / "shapes" / f"{shape_id}.ply"
+    assert kept.is_file()
+
+    response = client.delete(f"/api/v1/shapes/{shape_id}", headers=keys.auth())
+
+    assert response.status_code == 204
+    assert not kept.exists()

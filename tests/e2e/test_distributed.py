@@ -203,6 +203,35 @@ def test_a_worker_whose_simulation_fails_reports_an_error_trial_and_the_study_go
     assert {trial["status"] for trial in trials if trial["worker"] != "w-without-mesh"} == {"ok"}
 
 
+def test_a_shape_uploaded_through_the_api_is_fed_to_a_simulation_on_a_worker(cluster):
+    import io
+
+    mesh = io.BytesIO()
+    trimesh.creation.box(extents=(0.14, 0.07, 0.01)).export(mesh, file_type="stl")
+    cluster.start_serve()
+    cluster.start_worker("w1")
+    upload = cluster.http.post(
+        "/shapes", files={"file": ("phone.stl", mesh.getvalue(), "model/stl")}, data={"mass": "0.15"}
+    )
+    assert upload.status_code == 201, upload.text
+    scenario = tiny_scenario()
+    scenario["items"] = {"uploaded": True, "counts": {upload.json()["id"]: 2}, "resolution": 4}
+
+    params = {"E": 2e6, "nu": 0.3, "e": 0.5, "mu": 0.4}
+    created = cluster.http.post("/simulations", json={"scenario": scenario, "params": params})
+    assert created.status_code == 202, created.text
+    done = wait_for(
+        lambda: (body := cluster.http.get(f"/simulations/{created.json()['id']}").json())["state"] == "done"
+        and body,
+        120,
+        "the simulation on the uploaded shape",
+    )
+
+    assert done["worker"] == "w1"
+    assert done["result"]["status"] == "ok", done["result"]["message"]
+    assert done["result"]["n_items"] == 2
+
+
 def test_a_worker_stopped_with_sigterm_finishes_its_trial_first(cluster):
     cluster.start_serve()
     worker = cluster.start_worker("w1")

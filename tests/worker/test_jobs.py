@@ -120,29 +120,48 @@ def test_a_relative_mesh_path_is_read_from_this_workers_mesh_directory(tmp_path)
     from dem.scenarios.tray import TrayConfig, parametric_tray_mesh
 
     mine, theirs = tmp_path / "mine", tmp_path / "theirs"
-    (mine / "trays").mkdir(parents=True)
+    (mine / "meshes" / "trays").mkdir(parents=True)
     theirs.mkdir()
     vertices, faces = parametric_tray_mesh(TrayConfig())
-    trimesh.Trimesh(vertices, faces, process=False).export(mine / "trays" / "t.stl")
+    trimesh.Trimesh(vertices, faces, process=False).export(mine / "meshes" / "trays" / "t.stl")
     spec = tiny_spec(trial="t-mesh", scenario={**TINY_SCENARIO, "tray": {"mesh_file": "trays/t.stl"}})
 
-    here = SimulationResult.model_validate(run_trial(spec, mesh_root=mine))
-    elsewhere = SimulationResult.model_validate(run_trial(spec, mesh_root=theirs))
+    here = SimulationResult.model_validate(run_trial(spec, data_dir=mine))
+    elsewhere = SimulationResult.model_validate(run_trial(spec, data_dir=theirs))
 
     assert here.status is SimulationStatus.OK, here.message
     assert elsewhere.status is SimulationStatus.ERROR
-    assert f"tray.mesh_file {theirs / 'trays' / 't.stl'} does not exist" in elsewhere.message
+    assert f"tray.mesh_file {theirs / 'meshes' / 'trays' / 't.stl'} does not exist" in elsewhere.message
 
 
 def test_a_relative_mesh_path_leaving_the_mesh_directory_is_an_error_result(tmp_path):
     (tmp_path / "outside.stl").write_text("solid x\nendsolid x\n")
-    (tmp_path / "meshes").mkdir()
     spec = tiny_spec(trial="t-out", scenario={**TINY_SCENARIO, "tray": {"mesh_file": "../outside.stl"}})
 
-    result = SimulationResult.model_validate(run_trial(spec, mesh_root=tmp_path / "meshes"))
+    result = SimulationResult.model_validate(run_trial(spec, data_dir=tmp_path))
 
     assert result.status is SimulationStatus.ERROR
     assert "leaves the mesh directory" in result.message
+
+
+def test_uploaded_shapes_are_fed_from_this_workers_data_dir(tmp_path):
+    import trimesh
+
+    from dem.scenarios.paths import shape_file
+
+    kept = shape_file(tmp_path, "sh-box")
+    kept.parent.mkdir(parents=True)
+    trimesh.creation.box(extents=(0.14, 0.07, 0.01)).export(kept)
+    items = {"uploaded": True, "counts": {"sh-box": 2}, "masses": {"sh-box": 0.15}, "resolution": 4}
+    spec = tiny_spec(trial="t-up", scenario={**TINY_SCENARIO, "items": items})
+
+    fed = SimulationResult.model_validate(run_trial(spec, data_dir=tmp_path))
+    elsewhere = SimulationResult.model_validate(run_trial(spec))
+
+    assert fed.status is SimulationStatus.OK, fed.message
+    assert fed.n_items == 2
+    assert elsewhere.status is SimulationStatus.ERROR
+    assert "uploaded shapes are kept by the service" in elsewhere.message
 
 
 def test_longest_first_starts_the_stiffest_trials_first():
