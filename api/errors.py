@@ -13,6 +13,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import compile_path
 
 log = logging.getLogger(__name__)
 
@@ -76,6 +77,27 @@ def _body_model(request: Request):
     return model if isinstance(model, type) and hasattr(model, "model_fields") else None
 
 
+HTTP_METHODS = frozenset({"GET", "PUT", "POST", "DELETE", "OPTIONS", "HEAD", "PATCH", "TRACE"})
+
+
+def _method_not_allowed(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+    """405 whose ``Allow`` names the methods of every operation on the path, from the published
+    OpenAPI document: Starlette names only those of the first route that matched the path
+    (DELETE, not GET, on ``/studies/{id}``)."""
+    allowed: set[str] = set()
+    for template, operations in request.app.openapi()["paths"].items():
+        if compile_path(template)[0].match(request.url.path):
+            allowed |= {method.upper() for method in operations} & HTTP_METHODS
+    if not allowed:  # a route left out of the document (/docs): Starlette's own answer
+        allowed = {m.strip() for m in (exc.headers or {}).get("Allow", "").split(",") if m.strip()}
+    allow = ", ".join(sorted(allowed))
+    return JSONResponse(
+        {"detail": f"{request.method} is not allowed on {request.url.path}; use {allow}"},
+        status_code=405,
+        headers={"Allow": allow},
+    )
+
+
 def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(DemcalError)
     async def _demcal_error(request: Request, exc: DemcalError) -> JSONResponse:
@@ -88,6 +110,8 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        if exc.status_code == 405:
+            return _method_not_allowed(request, exc)
         return JSONResponse({"detail": exc.detail}, status_code=exc.status_code, headers=exc.headers)
 
     @app.exception_handler(Exception)

@@ -18,6 +18,25 @@ def test_an_id_with_a_nul_character_is_404_not_500(client, keys, resource):
     assert "NUL" in response.json()["detail"]
 
 
+HTTP_METHODS = {"GET", "POST", "PUT", "PATCH", "DELETE"}
+
+
+def test_a_method_not_allowed_is_405_with_every_allowed_method_in_allow(client, keys):
+    # One path can have several routes (GET and DELETE /studies/{id}): Allow must name them all.
+    paths = client.get("/openapi.json").json()["paths"]
+
+    for path, operations in paths.items():
+        documented = {method.upper() for method in operations} & HTTP_METHODS
+        url = path.replace("{", "x-").replace("}", "")
+        for method in sorted(HTTP_METHODS - documented):
+            response = client.request(method, url, headers=keys.auth())
+
+            assert response.status_code == 405, (method, path, response.text)
+            allowed = {word.strip() for word in response.headers["allow"].split(",")}
+            assert allowed == documented, (method, path, allowed)
+            assert method in response.json()["detail"]
+
+
 def post_raw(client, keys, path: str, document: dict, raw: dict[str, str]):
     """POST ``document`` as JSON with some values replaced by raw JSON tokens (``Infinity``)."""
     text = json.dumps(document)
