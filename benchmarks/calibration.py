@@ -5,22 +5,24 @@ simulations does it need, and does its recommendation reproduce the experiment o
    feeder this is expensive, so it is read from the cache ``benchmarks/truth_pilot.py`` writes
    (``--truth-file``), which also holds the truth re-simulated on fresh seeds. Without a truth
    file, the quick feeder's truth (``--truth``) is simulated here.
-2. Calibrate against it with each ``--algorithms`` entry (nsga2 = the paper's GA, surrogate,
-   random) at the same budget, batch sizes and study seed.
+2. Calibrate against it with each ``--algorithms`` entry in turn (surrogate, then nsga2 = the
+   paper's GA, then random) at the same budget, batch sizes and study seed; the studies' own
+   end-of-study validation is off (``validation.seeds = 0``), so the budget is all search.
 3. Re-simulate each method's first matching set and its recommendation on the fresh seeds and
-   compare with the experiment: Wasserstein-1 distance (W1) beside the truth's own W1 on the
-   same fresh seeds (the best any parameter set can be expected to do), and the fresh median
-   against the target. A set is *validated* when its fresh median is within the tolerance.
+   judge them with the studies' own rule (``optimizer/validation.py``: a permutation test of the
+   study's distance, level 0.1), with the Wasserstein-1 distance (W1) beside the truth's own W1
+   on the same fresh seeds (the best any parameter set can be expected to do).
 
-Prints, per method: simulations until the first match, until the first validated match (when
-the first match or the recommendation validated), the fresh-seed W1 and wall time; writes
-everything to ``--out`` (JSON). Embedded path: a temporary SQLite ``SqlStore`` and the local
-process pool, as ``demcal calibrate``.
+Prints, per method: simulations until the first match and until the first validated match
+(``optimizer.report.first_match``: runs in creation order, extra replicates included), the
+fresh-seed W1 and wall time. Resumable: the studies live in a SQLite file (``--db``, default
+beside ``--out``) and every figure is written to ``--out`` (JSON) as it comes, so a run stopped
+by ``--search-minutes`` or a kill leaves partial figures, and the same command continues it.
 
     python -m benchmarks.calibration                       # quick feeder (examples/study-quick.toml)
     NUMBA_NUM_THREADS=1 nice -n 10 python -m benchmarks.calibration --study examples/study.toml \\
-        --truth-file benchmarks/full-feeder-truth.json --budget 24 --population 8 --offspring 4 \\
-        --E-bounds 1e6,5e7 --fresh 5 --out /tmp/full-feeder-calibration.json
+        --truth-file benchmarks/full-feeder-truth.json --budget 60 --population 10 --offspring 5 \\
+        --E-bounds 3e6,3e8 --fresh 5 --out /tmp/full-feeder-calibration.json --search-minutes 40
 
 Run it as a module (``python -m``): ``benchmarks/queue.py`` would shadow the standard library's
 ``queue`` when the script's folder is first on the path.
@@ -31,7 +33,6 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import tempfile
 import time
 from pathlib import Path
 
@@ -41,10 +42,10 @@ from api.db import create_db_engine, upgrade_database
 from api.store import SqlStore
 from optimizer.driver import Driver
 from optimizer.objectives import evaluate
-from optimizer.pareto import summary as pareto_summary
-from optimizer.protocols import StudyStatus, TrialSpec
-from optimizer.report import build_summary
+from optimizer.protocols import StudyStatus, TrialRecord, TrialSpec, TrialState
+from optimizer.report import build_summary, first_match
 from optimizer.study import load_study_file
+from optimizer.validation import VALIDATED, check
 from worker.local import LocalPoolExecutor
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -82,31 +83,59 @@ def truth_from_file(path: Path, fresh: int):
     return data["truth"], experiment, fresh_seeds, truth_fresh
 
 
-def validate(executor, scenario, evaluation, seeds, experiment, target, tolerance, label, timeout_s):
-    results = simulate(executor, scenario, evaluation["params"], seeds, label, timeout_s)
-    values = [r.n_remaining for r in results if r.ok]
-    failed = len(results) - len(values)
-    w1 = wasserstein_distance(values, experiment) if values else None
-    median = statistics.median(values) if values else None
-    return {
-        "individual": evaluation["individual"],
-        "params": evaluation["params"],
-        "search_n_remaining": evaluation["n_remaining"],
-        "fresh_n_remaining": values,
-        "fresh_failed": failed,
-        "fresh_median": median,
-        "fresh_w1": w1,
-        "validated": bool(median is not None and not failed and abs(median - target) <= tolerance + 1e-9),
-    }
+def validate(executor, definition, evaluation, seeds, label, timeout_s):
+    """The evaluation's fresh-seed runs judged by the studies' own rule, as JSON."""
+    specs = [
+        TrialSpec(
+            f"{label}-{seed}",
+            label,
+            evaluation.individual,
+            10**6,
+            r,
+            seed,
+            evaluation.params,
+            definition.scenario,
+            timeout_s,
+        )
+        for r, seed in enumerate(seeds)
+    ]
+    results = simulate(executor, definition.scenario, evaluation.params, seeds, label, timeout_s)
+    fresh = [TrialRecord(spec, TrialState.DONE, result) for spec, result in zip(specs, results, strict=True)]
+    row = check(evaluation, fresh, definition)
+    row["validated"] = row["verdict"] == VALIDATED
+    return row
 
 
 def first_matching(definition, records):
-    """The earliest individual (creation order) whose f1 was within tolerance, as JSON."""
+    """The earliest individual (creation order) whose f1 was within tolerance."""
     evaluations = evaluate(records, definition, definition.n_items())
     for evaluation in sorted(evaluations, key=lambda ev: ev.individual):
-        if evaluation.matches(definition.experiment.tolerance):
-            return pareto_summary(evaluation)
+        if evaluation.matches(definition.match_tolerance()):
+            return evaluation
     return None
+
+
+def save(path: Path | None, report: dict) -> None:
+    if path is not None:
+        path.write_text(json.dumps(report, indent=1, default=str))
+
+
+def search_row(store, study_id: str, finished: bool) -> dict:
+    records = store.trials(study_id)
+    summary = build_summary(store.load_study(study_id), records)
+    done = [r for r in records if r.result is not None]
+    return {
+        "study_id": study_id,
+        "simulations": summary["simulations"],
+        "failed": summary["failures"]["total"],
+        "failures": summary["failures"]["text"],
+        "finished": finished,
+        "first_match": summary["simulations_until_first_match"],
+        "best_f1": summary["best_f1"],
+        "simulation_wall_s": sum(r.result.wall_time_s for r in done),
+        "identifiability": summary.get("identifiability"),
+        "generations": summary["generations"],
+    }
 
 
 def main() -> None:
@@ -114,18 +143,24 @@ def main() -> None:
     parser.add_argument("--study", default="examples/study-quick.toml")
     parser.add_argument("--truth-file", default=None, help="Cached truth (benchmarks/truth_pilot.py).")
     parser.add_argument("--truth", default="", help=f"Quick mode: parameters to change in {QUICK_TRUTH}")
-    parser.add_argument("--algorithms", default="nsga2,surrogate,random")
+    parser.add_argument("--algorithms", default="surrogate,nsga2,random")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--population", type=int, default=8)
     parser.add_argument("--offspring", type=int, default=4)
-    parser.add_argument("--budget", type=int, default=20, help="Simulations per method (rounded down).")
+    parser.add_argument(
+        "--budget",
+        type=int,
+        default=20,
+        help="Individuals per method (rounded down); x replicates = simulations.",
+    )
     parser.add_argument("--seed", type=int, default=11)
     parser.add_argument("--fresh", type=int, default=10, help="Fresh seeds per validated set.")
     parser.add_argument("--E-bounds", default="", help="'low,high' in Pa (default: the study's).")
     parser.add_argument("--timeout", type=float, default=None, help="Per simulation, wall s.")
-    parser.add_argument("--out", default=None, help="Write every figure as JSON here.")
+    parser.add_argument("--out", default=None, help="Write every figure as JSON here (and resume from it).")
+    parser.add_argument("--db", default=None, help="The studies' SQLite file (default: --out with .db).")
     parser.add_argument(
-        "--search-minutes", type=float, default=0.0, help="Stop the searches after this long (0: the budget)."
+        "--search-minutes", type=float, default=0.0, help="Stop searching after this long (0: the budget)."
     )
     args = parser.parse_args()
 
@@ -138,8 +173,12 @@ def main() -> None:
         base = base.model_copy(update={"parameters": parameters})
     generations = max(0, (args.budget - args.population) // args.offspring)
     budget = args.population + generations * args.offspring
+    out = Path(args.out) if args.out else None
+    report: dict = json.loads(out.read_text()) if out is not None and out.exists() else {}
+    report.update(command=vars(args), budget=budget)
+    report.setdefault("methods", {})
+    db = Path(args.db) if args.db else (out.with_suffix(".db") if out else Path("/tmp/demcal-calibration.db"))
     executor = LocalPoolExecutor(args.workers)
-    report: dict = {"command": vars(args), "budget": budget, "methods": {}}
     try:
         started = time.monotonic()
         if args.truth_file:
@@ -152,6 +191,9 @@ def main() -> None:
                         executor, base.scenario, truth, fresh_seeds, "truth-fresh", args.timeout
                     )
                 ]
+        elif "experiment" in report:
+            truth, experiment = report["truth"], report["experiment"]
+            fresh_seeds, truth_fresh = report["fresh_seeds"], report["truth_fresh"]
         else:
             truth = dict(QUICK_TRUTH)
             for item in filter(None, args.truth.split(",")):
@@ -170,141 +212,128 @@ def main() -> None:
             truth_fresh=truth_fresh,
             truth_w1=truth_w1,
         )
+        save(out, report)
         print(f"truth {truth}\n  experiment N_t (seeds 1000-1009): {describe(experiment)}", flush=True)
         print(f"  truth on fresh seeds {fresh_seeds}: {describe(truth_fresh)}; W1 {truth_w1:.2f}", flush=True)
         print(f"  ({time.monotonic() - started:.0f} s)", flush=True)
 
-        with tempfile.TemporaryDirectory() as folder:
-            url = f"sqlite:///{folder}/bench.db"
-            upgrade_database(url)
-            store = SqlStore(create_db_engine(url))
-            studies = {}
-            for algorithm in args.algorithms.split(","):
-                definition = base.model_copy(
-                    update={
-                        "name": f"bench-{algorithm}",
-                        "seed": args.seed,
-                        "trial_timeout_s": args.timeout,
-                        "experiment": base.experiment.model_copy(update={"measured": experiment}),
-                        "ga": base.ga.model_copy(
-                            update={
-                                "algorithm": algorithm,
-                                "population": args.population,
-                                "offspring": args.offspring,
-                                "generations": generations,
-                            }
-                        ),
-                    }
-                )
-                studies[algorithm] = (
-                    definition,
-                    store.create_study(definition.model_dump(mode="json"), None),
-                )
-            # The methods advance together (one driver, round-robin, as the service steps its
-            # studies), so that a run cut short by --search-minutes compares them at equal effort.
-            driver, clock = Driver(store, executor), time.monotonic()
-            stop_at = clock + 60.0 * args.search_minutes if args.search_minutes else float("inf")
-            active = dict(studies)
-            while active and time.monotonic() < stop_at:
-                for algorithm, (_definition, study_id) in list(active.items()):
-                    progress = driver.step(study_id, timeout=0.2)
-                    if progress.recorded:
-                        print(
-                            f"  [{time.monotonic() - clock:5.0f} s] {algorithm}: {progress.trials_done} of "
-                            f"{progress.trials_planned} done, best f1 {progress.best_f1}",
-                            flush=True,
-                        )
-                    if not progress.active:
-                        del active[algorithm]
-            for _definition, study_id in active.values():
-                store.set_status(study_id, StudyStatus.CANCELLED, "benchmark search time over")
-                driver.step(study_id, timeout=0)  # withdraws its trials in flight
-            search_wall = time.monotonic() - clock
-            report["search_wall_s"] = search_wall
-            print(f"searches: {search_wall:.0f} s wall; unfinished: {sorted(active) or 'none'}", flush=True)
-
-            for algorithm, (definition, study_id) in studies.items():
-                clock = time.monotonic()
-                target, tolerance = definition.experiment.target(), definition.experiment.tolerance
-                records = store.trials(study_id)
-                summary = build_summary(store.load_study(study_id), records)
-                done = [r for r in records if r.result is not None]
-                row = {
-                    "simulations": summary["simulations"],
-                    "failed": sum(g["failed"] for g in summary["generations"]),
-                    "finished": algorithm not in active,
-                    "first_match": summary["simulations_until_first_match"],
-                    "best_f1": summary["best_f1"],
-                    "simulation_wall_s": sum(r.result.wall_time_s for r in done),
-                    "identifiability": summary.get("identifiability"),
-                    "generations": summary["generations"],
-                    "validated": [],
+        url = f"sqlite:///{db}"
+        upgrade_database(url)
+        store = SqlStore(create_db_engine(url))
+        driver = Driver(store, executor)
+        stop_at = time.monotonic() + 60.0 * args.search_minutes if args.search_minutes else float("inf")
+        for algorithm in args.algorithms.split(","):
+            row = report["methods"].setdefault(algorithm, {})
+            definition = base.model_copy(
+                update={
+                    "name": f"bench-{algorithm}",
+                    "seed": args.seed,
+                    "trial_timeout_s": args.timeout,
+                    "experiments": [base.experiment.model_copy(update={"measured": experiment})],
+                    "validation": base.validation.model_copy(update={"seeds": 0}),
+                    "budget": None,
+                    "ga": base.ga.model_copy(
+                        update={
+                            "algorithm": algorithm,
+                            "population": args.population,
+                            "offspring": args.offspring,
+                            "generations": generations,
+                        }
+                    ),
                 }
-                print(
-                    f"\n[{algorithm}] {row['simulations']} simulations ({row['failed']} failed, "
-                    f"{row['simulation_wall_s']:.0f} s of simulation wall); first match after "
-                    f"{row['first_match']}; best f1 {row['best_f1']}",
-                    flush=True,
-                )
-                candidates = []
-                first = first_matching(definition, records)
-                if first is not None:
-                    candidates.append(("first match", first))
-                if summary["recommendation"] and (
-                    first is None or summary["recommendation"]["individual"] != first["individual"]
-                ):
-                    candidates.append(("recommendation", summary["recommendation"]))
-                for role, evaluation in candidates:
-                    checked = validate(
-                        executor,
-                        base.scenario,
-                        evaluation,
-                        fresh_seeds,
-                        experiment,
-                        target,
-                        tolerance,
-                        f"{algorithm}-{evaluation['individual']}",
-                        args.timeout,
-                    )
-                    checked["role"] = role
-                    checked["simulations_until_found"] = (
-                        evaluation["individual"] + 1
-                    ) * definition.replicates
-                    row["validated"].append(checked)
-                    params = ", ".join(f"{k}={v:.3g}" for k, v in evaluation["params"].items())
-                    w1 = "-" if checked["fresh_w1"] is None else f"{checked['fresh_w1']:.2f}"
-                    verdict = "validated" if checked["validated"] else "not reproduced"
+            )
+            definition = type(definition).model_validate(definition.model_dump(mode="json"))
+            if "study_id" not in row:
+                row["study_id"] = store.create_study(definition.model_dump(mode="json"), None)
+            study_id, clock = row["study_id"], time.monotonic()
+            active = store.load_study(study_id).status is StudyStatus.RUNNING or not row.get("finished")
+            while active and time.monotonic() < stop_at:
+                progress = driver.step(study_id, timeout=0.5)
+                if progress.recorded:
+                    row.update(search_row(store, study_id, finished=False))
+                    row["search_wall_s"] = row.get("search_wall_s", 0.0) + time.monotonic() - clock
+                    clock = time.monotonic()
+                    save(out, report)
                     print(
-                        f"  {role}: individual {evaluation['individual']} ({params}), search N_t "
-                        f"{evaluation['n_remaining']}; fresh {describe(checked['fresh_n_remaining'])}, "
-                        f"W1 {w1} (truth {truth_w1:.2f}); {verdict}",
+                        f"  [{row['search_wall_s']:5.0f} s] {algorithm}: {progress.trials_done} of "
+                        f"{progress.trials_planned} done, first match after {row['first_match']}, "
+                        f"best f1 {progress.best_f1}",
                         flush=True,
                     )
-                found = [c["simulations_until_found"] for c in row["validated"] if c["validated"]]
-                row["first_validated_match"] = min(found) if found else None
-                row["validation_wall_s"] = time.monotonic() - clock
-                report["methods"][algorithm] = row
+                active = progress.active
+            row.update(search_row(store, study_id, finished=not active))
+            save(out, report)
+            print(
+                f"\n[{algorithm}] {row['simulations']} simulations ({row['failures']}, "
+                f"{row['simulation_wall_s']:.0f} s of simulation wall); first match after "
+                f"{row['first_match']}; best f1 {row['best_f1']}"
+                f"{'' if row['finished'] else ' (search unfinished: time over)'}",
+                flush=True,
+            )
+            if active:  # time is over: the next run of the same command continues this study
+                executor.cancel(sorted(executor.in_flight()))
+
+            records = store.trials(study_id)
+            evaluations = evaluate(records, definition, definition.n_items())
+            recommendation = (store.load_study(study_id).recommendation or {}).get("individual")
+            candidates = []
+            first = first_matching(definition, records)
+            if first is not None:
+                candidates.append(("first match", first))
+            chosen = next((ev for ev in evaluations if ev.individual == recommendation), None)
+            if not active and chosen is not None and (first is None or chosen.individual != first.individual):
+                candidates.append(("recommendation", chosen))
+            checked_rows = row.setdefault("validated", [])
+            for role, evaluation in candidates:
+                if any(c["individual"] == evaluation.individual for c in checked_rows):
+                    continue
+                clock = time.monotonic()
+                checked = validate(
+                    executor,
+                    definition,
+                    evaluation,
+                    fresh_seeds,
+                    f"{algorithm}-{evaluation.individual}",
+                    args.timeout,
+                )
+                checked.update(
+                    role=role,
+                    simulations_until_found=first_match(records, definition, among={evaluation.individual}),
+                    validation_wall_s=time.monotonic() - clock,
+                )
+                checked_rows.append(checked)
+                save(out, report)
+                params = ", ".join(f"{k}={v:.3g}" for k, v in evaluation.params.items())
+                w1 = "-" if checked["w1"] is None else f"{checked['w1']:.2f}"
                 print(
-                    f"  first validated match after {row['first_validated_match']} simulations; "
-                    f"validation {row['validation_wall_s']:.0f} s wall",
+                    f"  {role}: individual {evaluation.individual} ({params}), search N_t "
+                    f"{evaluation.n_remaining}; fresh {describe(checked['n_remaining'])}, "
+                    f"W1 {w1} (truth {truth_w1:.2f}); {checked['verdict']}",
                     flush=True,
                 )
-                if args.out:
-                    Path(args.out).write_text(json.dumps(report, indent=1, default=str))
+            found = [c["simulations_until_found"] for c in checked_rows if c["validated"]]
+            row["first_validated_match"] = min(found) if found else None
+            save(out, report)
+            if active:
+                break  # the recommendation is not final: validated when the search ends
     finally:
         executor.close()
 
-    print(f"\nbudget {budget} simulations per method; target N_t = {target:g} +- {tolerance:g}")
-    print(f"searches {report['search_wall_s']:.0f} s wall together (interleaved)")
+    print(
+        f"\nbudget {budget} individuals per method (x replicates, + extra replicates); "
+        f"experiment {describe(experiment)}"
+    )
     print("| method | sims | to first match | to first validated match | fresh W1 (truth's) | sim wall, s |")
     for algorithm, row in report["methods"].items():
-        w1 = [f"{c['fresh_w1']:.2f}" for c in row["validated"] if c["fresh_w1"] is not None]
+        if "simulations" not in row:
+            continue
+        w1 = [f"{c['w1']:.2f}" for c in row.get("validated", []) if c["w1"] is not None]
         print(
-            f"| {algorithm} | {row['simulations']} | {row['first_match']} | {row['first_validated_match']} | "
+            f"| {algorithm} | {row['simulations']}{'' if row['finished'] else ' (unfinished)'} | "
+            f"{row['first_match']} | {row.get('first_validated_match')} | "
             f"{', '.join(w1) or '-'} ({truth_w1:.2f}) | {row['simulation_wall_s']:.0f} |"
         )
-    if args.out:
-        Path(args.out).write_text(json.dumps(report, indent=1, default=str))
+    save(out, report)
 
 
 if __name__ == "__main__":
