@@ -14,12 +14,15 @@ sectors; Zhou et al., Powder Technol. 125 (2002) 45 measure DEM heaps the same w
    the surface cells with centres between ``inner R`` and ``outer R``: the rounded apex and the
    toe, where the surface is not a cone, are left out.
 5. The angle is that of one line fitted to the cells of all sectors together (each sector's own
-   line gives ``sector_angles_deg``; their standard deviation says how round the heap is). The
+   line gives ``sector_angles_deg``; their standard deviation says how round the heap is). Its
+   standard error ``angle_se_deg`` is the least-squares one, from the residuals of the cells
+   about the line (``s^2 / sum (rho - mean rho)^2`` for the slope), carried to the angle by
+   ``d alpha = d slope / (1 + slope^2)``: how well one heap's surface determines its angle. The
    height is the highest top point.
 
-The choices (sectors, bin width, inner and outer fractions) move the angle by far less than the
-seed-to-seed spread of a heap (``tests/dem/test_heap.py`` checks this); the fit is exact on a
-sphere-covered cone (the analytic case). Pure numpy, shared by every engine: the LIGGGHTS adapter
+The choices (sectors, bin width, inner and outer fractions) move the mean angle of a few heaps
+by less than that mean's standard error (``tests/dem/test_heap.py`` checks this); the fit is
+exact on a sphere-covered cone (the analytic case). Pure numpy, shared by every engine: the LIGGGHTS adapter
 reads the final positions back and calls the same ``fit_heap``.
 """
 
@@ -54,6 +57,7 @@ class HeapFitError(ValueError):
 class HeapFit:
     angle_deg: float
     spread_deg: float  # standard deviation over the sectors
+    angle_se_deg: float  # standard error of angle_deg from the fit's residuals
     height: float  # m
     radius: float  # R, the heap's foot radius, m
     sector_angles_deg: tuple[float, ...]
@@ -112,10 +116,14 @@ def fit_heap(
             f"surface cells between fit.inner and fit.outer; use more particles, a smaller "
             f"fit.bin_width or fewer fit.sectors"
         )
-    pooled = np.polyfit(np.concatenate(xs), np.concatenate(hs), 1)[0]
+    x, h = np.concatenate(xs), np.concatenate(hs)
+    pooled, intercept = np.polyfit(x, h, 1)
+    residual = h - (pooled * x + intercept)
+    slope_se = math.sqrt(float(residual @ residual) / (len(x) - 2) / float(np.sum((x - x.mean()) ** 2)))
     return HeapFit(
         angle_deg=math.degrees(math.atan(-pooled)),
         spread_deg=float(np.std(angles)),
+        angle_se_deg=math.degrees(slope_se / (1.0 + pooled * pooled)),
         height=float(top.max()),
         radius=foot,
         sector_angles_deg=tuple(angles),
