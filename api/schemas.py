@@ -17,6 +17,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from dem.scenarios.registry import publish_config_schema
 from optimizer.protocols import PARAMETER_NAMES, StudyStatus, TrialState
 
 
@@ -280,9 +281,17 @@ class SimulationCreate(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     scenario: dict[str, Any] = Field(
-        description="A scenario configuration; its kind (default feeder) picks it from the registry."
+        description="A scenario configuration; its kind (default feeder) picks it from the registry.",
+        json_schema_extra=publish_config_schema,
     )
-    params: dict[str, float] = Field(description="E (Pa), nu, e, mu.")
+    params: dict[str, float] = Field(
+        description="E (Pa), nu, e, mu.",
+        json_schema_extra={
+            "properties": {name: {"type": "number"} for name in PARAMETER_NAMES},
+            "required": list(PARAMETER_NAMES),
+            "additionalProperties": False,
+        },
+    )
     seed: int = Field(0, ge=0, le=2**31 - 1)
     timeout_s: float | None = Field(None, gt=0, le=7 * 24 * 3600)
     engine: str = Field("numba", max_length=32, description="numba (built in) or liggghts.")

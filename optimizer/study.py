@@ -27,6 +27,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from dem.parameters import PARAMETER_NAMES, in_physical_range, physical_range_text
+from dem.scenarios.registry import publish_config_schema
 
 
 class StudyDefinitionError(ValueError):
@@ -223,6 +224,7 @@ class StudyDefinition(_Strict):
         ...,
         description="The scenario's configuration as a table; its 'kind' (default 'feeder') picks the "
         "scenario from dem.scenarios.registry, whose config model validates the rest.",
+        json_schema_extra=publish_config_schema,
     )
     engine: str = Field(
         "numba",

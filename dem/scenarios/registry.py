@@ -96,6 +96,47 @@ def validate_config(data: dict[str, Any], prefix: str = "scenario") -> dict[str,
         raise ScenarioConfigError("; ".join(problems)) from None
 
 
+def config_json_schema() -> dict[str, Any]:
+    """The JSON Schema of a config of any registered kind, self-contained (no ``$ref``), so that
+    an API can publish it for a field holding a scenario. A kind other than ``DEFAULT_KIND`` must
+    be named; every alternative forbids unknown keys, as ``validate_config`` does."""
+    _load_built_ins()
+    alternatives = []
+    for kind in sorted(_registry):
+        schema = _inline(_registry[kind].config_model.model_json_schema())
+        if kind != DEFAULT_KIND:
+            schema["required"] = sorted({*schema.get("required", []), "kind"})
+        alternatives.append(schema)
+    return {"anyOf": alternatives}
+
+
+def publish_config_schema(schema: dict[str, Any]) -> None:
+    """``json_schema_extra`` for a field that holds a scenario config as a plain mapping (it is
+    validated by ``validate_config``): its published schema becomes ``config_json_schema()``,
+    computed when the schema is asked for, not when the field's module is imported."""
+    description = schema.get("description")
+    schema.clear()
+    schema.update(config_json_schema())
+    if description:
+        schema["description"] = description
+
+
+def _inline(schema: dict[str, Any]) -> dict[str, Any]:
+    definitions = schema.pop("$defs", {})
+
+    def resolve(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                target = resolve(definitions[node["$ref"].rsplit("/", 1)[-1]])
+                return {**target, **{k: resolve(v) for k, v in node.items() if k != "$ref"}}
+            return {key: resolve(value) for key, value in node.items()}
+        if isinstance(node, list):
+            return [resolve(item) for item in node]
+        return node
+
+    return resolve(schema)
+
+
 def load_config_file(path: Path | str):
     """A scenario config from a TOML file (its ``kind`` picks the scenario; relative paths in it
     are taken from the file's folder where the scenario has such paths)."""

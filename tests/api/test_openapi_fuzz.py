@@ -108,3 +108,20 @@ def test_openapi_document_is_served(fuzzed_app):
 
     assert "/api/v1/studies/{study_id}/pareto" in document["paths"]
     assert document["components"]["securitySchemes"]["HTTPBearer"]["scheme"] == "bearer"
+
+
+def test_scenario_and_params_publish_their_real_schema(fuzzed_app):
+    app, _ = fuzzed_app
+    with TestClient(app) as client:
+        schemas = client.get("/openapi.json").json()["components"]["schemas"]
+
+    for model in ("SimulationCreate", "StudyDefinition"):
+        scenario = schemas[model]["properties"]["scenario"]
+        by_title = {alternative["title"]: alternative for alternative in scenario["anyOf"]}
+        feeder = by_title["FeederConfig"]
+        assert feeder["additionalProperties"] is False
+        assert {"tray", "items", "stages", "vibration", "run"} <= set(feeder["properties"])
+        assert "$ref" not in str(scenario)  # self-contained
+        assert "kind" in by_title["HeapConfig"]["required"]  # only the feeder may leave it out
+    params = schemas["SimulationCreate"]["properties"]["params"]
+    assert (params["required"], params["additionalProperties"]) == (["E", "nu", "e", "mu"], False)
