@@ -54,6 +54,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numba
 
@@ -178,15 +179,29 @@ def share_weight(delta):
     return d2 * d2
 
 
+class PairLaw(NamedTuple):
+    """The law's constants of one pair of touching bodies (or a body and a wall): what a contact
+    needs of the two materials and sizes, built once per pair (``dem/forces.py``)."""
+
+    k_n: float  # normal stiffness K, N/m
+    c_n: float  # normal damping C, N s/m
+    k_t: float  # tangential stiffness K_t, N/m
+    c_t: float  # tangential damping C_t, N s/m
+    mu: float  # friction coefficient of the pair
+
+
 @numba.njit(**JIT_FLAGS)
-def sphere_contact_force(nx, ny, nz, delta, vx, vy, vz, weight, k_n, c_n, k_t, c_t, mu, hist, h, hist_dt):
+def sphere_contact_force(n, delta, v, weight, law, hist, h, hist_dt):
     """Force on the first partner of one sphere contact; returns (fx, fy, fz, f_normal).
 
-    ``n`` points from the second partner to the first, ``v`` is the first partner's velocity
-    relative to the second at the contact point, ``weight`` the contact's share of the body
-    pair's ``k_n, c_n, k_t, c_t``. ``hist[h]`` is the tangential spring elongation, updated in
+    ``n`` (a 3-tuple) points from the second partner to the first, ``v`` is the first partner's
+    velocity relative to the second at the contact point, ``weight`` the contact's share of the
+    pair's ``law`` (``PairLaw``). ``hist[h]`` is the tangential spring elongation, updated in
     place with the time increment ``hist_dt`` (0 re-evaluates forces without advancing history).
     """
+    nx, ny, nz = n
+    vx, vy, vz = v
+    k_n, c_n, k_t, c_t, mu = law
     v_n = vx * nx + vy * ny + vz * nz
     f_n = weight * (k_n * delta - c_n * v_n)
     if f_n < 0.0:
@@ -240,7 +255,7 @@ def sphere_contact_force(nx, ny, nz, delta, vx, vy, vz, weight, k_n, c_n, k_t, c
 
 
 @numba.njit(**JIT_FLAGS)
-def patch_damping(nx, ny, nz, s_uu, s_uw, s_ww, wx, wy, wz, c_n, c_t, max_spin):
+def patch_damping(n, moment, omega, c_n, c_t, max_spin):
     """Torque on the first partner of a face contact from the dampers spread over its patch.
 
     A rounded polyhedron's face contact is one force at the patch's centre of pressure
@@ -251,8 +266,12 @@ def patch_damping(nx, ny, nz, s_uu, s_uw, s_ww, wx, wy, wz, c_n, c_t, max_spin):
     area (``s_uu = <u^2>`` about the centre, ``plane_basis(n)``), so rocking is damped like the
     normal motion; tangential dampers resist spinning about n with ``-c_t (s_uu + s_ww) omega_n``,
     capped at ``max_spin sqrt(s_uu + s_ww)`` (Coulomb: ``mu F_n`` times the patch's radius of
-    gyration). Only dissipates; zero for a point contact (all moments 0).
+    gyration). ``n``, ``moment = (s_uu, s_uw, s_ww)`` and the relative spin ``omega`` are
+    3-tuples. Only dissipates; zero for a point contact (all moments 0).
     """
+    nx, ny, nz = n
+    s_uu, s_uw, s_ww = moment
+    wx, wy, wz = omega
     ux, uy, uz, vx, vy, vz = plane_basis(nx, ny, nz)
     om_u = ux * wx + uy * wy + uz * wz
     om_w = vx * wx + vy * wy + vz * wz

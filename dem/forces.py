@@ -34,11 +34,61 @@ import math
 import numba
 
 from dem.conf import JIT_FLAGS
-from dem.contact import patch_damping, share_weight, sphere_contact_force
+from dem.contact import PairLaw, patch_damping, share_weight, sphere_contact_force
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
 from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_GROUPS, N_PAIRS
 from dem.rounded_contact import facet_geometry, pair_geometry
+
+
+@numba.njit(**JIT_FLAGS)
+def pair_law(k_n, m_eff, row):
+    """The ``PairLaw`` of two partners of normal stiffness ``k_n`` and effective mass ``m_eff``
+    whose materials' pair row is ``row`` (``L_*`` columns): C = 2 zeta sqrt(K m*), K_t from the
+    ratio, C_t = 2 zeta sqrt(K_t m*) (``dem/contact.py``)."""
+    k_t = row[L_KT] * k_n
+    return PairLaw(
+        k_n,
+        2.0 * row[L_ZETA] * math.sqrt(k_n * m_eff),
+        k_t,
+        2.0 * row[L_ZETA] * math.sqrt(k_t * m_eff),
+        row[L_MU],
+    )
+
+
+@numba.njit(**JIT_FLAGS)
+def _group_law(grp_law, g):
+    """The ``PairLaw`` stored for body pair group g by ``body_pair_laws``."""
+    return PairLaw(grp_law[g, G_KN], grp_law[g, G_CN], grp_law[g, G_KT], grp_law[g, G_CT], grp_law[g, G_MU])
+
+
+@numba.njit(**JIT_FLAGS)
+def _point_velocity(vel, omega, b, rx, ry, rz):
+    """Velocity of body b's material point at lever r from its centre: v + omega x r."""
+    return (
+        vel[b, 0] + omega[b, 1] * rz - omega[b, 2] * ry,
+        vel[b, 1] + omega[b, 2] * rx - omega[b, 0] * rz,
+        vel[b, 2] + omega[b, 0] * ry - omega[b, 1] * rx,
+    )
+
+
+@numba.njit(**JIT_FLAGS)
+def _push(force, torque, b, fx, fy, fz, rx, ry, rz):
+    """Adds the force f, applied at lever r from body b's centre, and its torque r x f."""
+    force[b, 0] += fx
+    force[b, 1] += fy
+    force[b, 2] += fz
+    torque[b, 0] += ry * fz - rz * fy
+    torque[b, 1] += rz * fx - rx * fz
+    torque[b, 2] += rx * fy - ry * fx
+
+
+@numba.njit(**JIT_FLAGS)
+def _twist(torque, b, tx, ty, tz):
+    """Adds the torque t (a couple: no force) to body b."""
+    torque[b, 0] += tx
+    torque[b, 1] += ty
+    torque[b, 2] += tz
 
 
 @numba.njit(**JIT_FLAGS)
@@ -60,14 +110,10 @@ def body_pair_laws(pairs, sbody, bodies, material):
             k_a, k_b = e_a * diameter[ba], e_b * diameter[bb]
             k_n = k_a * k_b / (k_a + k_b)
         m_eff = mass[ba] * mass[bb] / (mass[ba] + mass[bb])
-        zeta = material.law[ma, mb, L_ZETA]
-        k_t = material.law[ma, mb, L_KT] * k_n
+        law = pair_law(k_n, m_eff, material.law[ma, mb])
         g = pp_group[p]
-        grp_law[g, G_KN] = k_n
-        grp_law[g, G_CN] = 2.0 * zeta * math.sqrt(k_n * m_eff)
-        grp_law[g, G_KT] = k_t
-        grp_law[g, G_CT] = 2.0 * zeta * math.sqrt(k_t * m_eff)
-        grp_law[g, G_MU] = material.law[ma, mb, L_MU]
+        grp_law[g, G_KN], grp_law[g, G_CN], grp_law[g, G_KT] = law.k_n, law.c_n, law.k_t
+        grp_law[g, G_CT], grp_law[g, G_MU] = law.c_t, law.mu
 
 
 @numba.njit(**JIT_FLAGS)
@@ -163,69 +209,24 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
             cx, cy, cz = x[j, 0] + nx * reach, x[j, 1] + ny * reach, x[j, 2] + nz * reach
         rax, ray, raz = cx - pos[ba, 0], cy - pos[ba, 1], cz - pos[ba, 2]
         rbx, rby, rbz = cx - pos[bb, 0], cy - pos[bb, 1], cz - pos[bb, 2]
-        vx = (vel[ba, 0] + omega[ba, 1] * raz - omega[ba, 2] * ray) - (
-            vel[bb, 0] + omega[bb, 1] * rbz - omega[bb, 2] * rby
-        )
-        vy = (vel[ba, 1] + omega[ba, 2] * rax - omega[ba, 0] * raz) - (
-            vel[bb, 1] + omega[bb, 2] * rbx - omega[bb, 0] * rbz
-        )
-        vz = (vel[ba, 2] + omega[ba, 0] * ray - omega[ba, 1] * rax) - (
-            vel[bb, 2] + omega[bb, 0] * rby - omega[bb, 1] * rbx
-        )
+        vax, vay, vaz = _point_velocity(vel, omega, ba, rax, ray, raz)
+        vbx, vby, vbz = _point_velocity(vel, omega, bb, rbx, rby, rbz)
         g = pp_group[p]
         weight = share_weight(delta) / grp_sum[g]
-        mu = grp_law[g, G_MU]
+        law = _group_law(grp_law, g)
         fx, fy, fz, f_n = sphere_contact_force(
-            nx,
-            ny,
-            nz,
-            delta,
-            vx,
-            vy,
-            vz,
-            weight,
-            grp_law[g, G_KN],
-            grp_law[g, G_CN],
-            grp_law[g, G_KT],
-            grp_law[g, G_CT],
-            mu,
-            pp_hist,
-            p,
-            hist_dt,
+            (nx, ny, nz), delta, (vax - vbx, vay - vby, vaz - vbz), weight, law, pp_hist, p, hist_dt
         )
-        force[ba, 0] += fx
-        force[ba, 1] += fy
-        force[ba, 2] += fz
-        force[bb, 0] -= fx
-        force[bb, 1] -= fy
-        force[bb, 2] -= fz
-        torque[ba, 0] += ray * fz - raz * fy
-        torque[ba, 1] += raz * fx - rax * fz
-        torque[ba, 2] += rax * fy - ray * fx
-        torque[bb, 0] -= rby * fz - rbz * fy
-        torque[bb, 1] -= rbz * fx - rbx * fz
-        torque[bb, 2] -= rbx * fy - rby * fx
+        _push(force, torque, ba, fx, fy, fz, rax, ray, raz)
+        _push(force, torque, bb, -fx, -fy, -fz, rbx, rby, rbz)
         if rounded:
+            moment = (pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2])
+            spin = (omega[ba, 0] - omega[bb, 0], omega[ba, 1] - omega[bb, 1], omega[ba, 2] - omega[bb, 2])
             tx, ty, tz = patch_damping(
-                nx,
-                ny,
-                nz,
-                pairs.moment[p, 0],
-                pairs.moment[p, 1],
-                pairs.moment[p, 2],
-                omega[ba, 0] - omega[bb, 0],
-                omega[ba, 1] - omega[bb, 1],
-                omega[ba, 2] - omega[bb, 2],
-                weight * grp_law[g, G_CN],
-                weight * grp_law[g, G_CT],
-                mu * f_n,
+                (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * f_n
             )
-            torque[ba, 0] += tx
-            torque[ba, 1] += ty
-            torque[ba, 2] += tz
-            torque[bb, 0] -= tx
-            torque[bb, 1] -= ty
-            torque[bb, 2] -= tz
+            _twist(torque, ba, tx, ty, tz)
+            _twist(torque, bb, -tx, -ty, -tz)
         n_contacts += 1
     return n_contacts, -1
 
@@ -383,7 +384,7 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
         # The law's constants depend on the body and the wall only: computed once per run of
         # contacts with the same wall.
         law_wall = -1
-        k_n = k_t = c_n = c_t = mu_w = 0.0
+        law = PairLaw(0.0, 0.0, 0.0, 0.0, 0.0)
         for a in range(p, q_end):
             if not wp_keep[a]:
                 continue
@@ -392,11 +393,7 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
             if w != law_wall:
                 mb, mw = bodies.material[b], wall_mat[w]
                 e_b, e_w = material.E[mb], material.E[mw]
-                k_n = diameter[b] * e_b * e_w / (e_b + e_w)
-                k_t = material.law[mb, mw, L_KT] * k_n
-                c_n = 2.0 * material.law[mb, mw, L_ZETA] * math.sqrt(k_n * mass[b])
-                c_t = 2.0 * material.law[mb, mw, L_ZETA] * math.sqrt(k_t * mass[b])
-                mu_w = material.law[mb, mw, L_MU]
+                law = pair_law(diameter[b] * e_b * e_w / (e_b + e_w), mass[b], material.law[mb, mw])
                 law_wall = w
             delta = wp_delta[a]
             nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
@@ -404,52 +401,18 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
             cy = wp_cp[a, 1] - 0.5 * delta * ny
             cz = wp_cp[a, 2] - 0.5 * delta * nz
             rax, ray, raz = cx - pos[b, 0], cy - pos[b, 1], cz - pos[b, 2]
-            vx = vel[b, 0] + omega[b, 1] * raz - omega[b, 2] * ray - wall_vel[w, 0]
-            vy = vel[b, 1] + omega[b, 2] * rax - omega[b, 0] * raz - wall_vel[w, 1]
-            vz = vel[b, 2] + omega[b, 0] * ray - omega[b, 1] * rax - wall_vel[w, 2]
+            vbx, vby, vbz = _point_velocity(vel, omega, b, rax, ray, raz)
+            v = (vbx - wall_vel[w, 0], vby - wall_vel[w, 1], vbz - wall_vel[w, 2])
             weight = share_weight(delta) / facet_sum[f]
-            fx, fy, fz, f_n = sphere_contact_force(
-                nx,
-                ny,
-                nz,
-                delta,
-                vx,
-                vy,
-                vz,
-                weight,
-                k_n,
-                c_n,
-                k_t,
-                c_t,
-                mu_w,
-                wp_hist,
-                a,
-                hist_dt,
-            )
-            force[b, 0] += fx
-            force[b, 1] += fy
-            force[b, 2] += fz
-            torque[b, 0] += ray * fz - raz * fy
-            torque[b, 1] += raz * fx - rax * fz
-            torque[b, 2] += rax * fy - ray * fx
+            fx, fy, fz, f_n = sphere_contact_force((nx, ny, nz), delta, v, weight, law, wp_hist, a, hist_dt)
+            _push(force, torque, b, fx, fy, fz, rax, ray, raz)
             if spheres.core_count[wp_i[a]] > 0:
+                moment = (wall_pairs.moment[a, 0], wall_pairs.moment[a, 1], wall_pairs.moment[a, 2])
+                spin = (omega[b, 0], omega[b, 1], omega[b, 2])
                 tx, ty, tz = patch_damping(
-                    nx,
-                    ny,
-                    nz,
-                    wall_pairs.moment[a, 0],
-                    wall_pairs.moment[a, 1],
-                    wall_pairs.moment[a, 2],
-                    omega[b, 0],
-                    omega[b, 1],
-                    omega[b, 2],
-                    weight * c_n,
-                    weight * c_t,
-                    mu_w * f_n,
+                    (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * f_n
                 )
-                torque[b, 0] += tx
-                torque[b, 1] += ty
-                torque[b, 2] += tz
+                _twist(torque, b, tx, ty, tz)
             n_contacts += 1
         p = q_end
     return n_contacts, -1
