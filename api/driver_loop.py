@@ -115,21 +115,30 @@ class DriverLoop:
         self.held: set[str] = set()
         self._last_scan = -float("inf")
         self._last_reconcile = -float("inf")
-        self._last_renew = -float("inf")
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        # The heartbeat renews leases on its own thread, so that a long step (a surrogate fit, a
+        # validation batch, a CPU-starved machine) never lets a lease lapse while we drive the
+        # study. The lock keeps ``held`` and the leases in step between the two threads.
+        self._lease_lock = threading.Lock()
+        self._lost: set[str] = set()
+        self._heartbeat: threading.Thread | None = None
 
     # -- life cycle ---------------------------------------------------------------------------
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self.run, name="demcal-driver-loop", daemon=True)
         self._thread.start()
+        self._heartbeat = threading.Thread(target=self._beat, name="demcal-lease-heartbeat", daemon=True)
+        self._heartbeat.start()
 
     def stop(self, timeout: float = 30.0) -> None:
         """Finish the current tick, release the leases and close the executor."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout)
+        if self._heartbeat is not None:
+            self._heartbeat.join(timeout)
         for study_id in list(self.held):
             self._drop(study_id)
         self.executor.close()
@@ -151,7 +160,7 @@ class DriverLoop:
         if now - self._last_scan >= self.scan_every_s:
             self._last_scan = now
             self._scan()
-        self._renew()
+        self._forget_lost()
         if now - self._last_reconcile >= self.reconcile_every_s:
             self._last_reconcile = now
             self._reconcile_simulations()
@@ -207,10 +216,13 @@ class DriverLoop:
         active = set(self.store.studies_in(ACTIVE_STUDIES))
         stopping = set(self.store.studies_in(STOPPING_STUDIES))
         for study_id in sorted(active - self.held):
-            if self.leases.acquire(study_id):
+            with self._lease_lock:
+                taken = self.leases.acquire(study_id)
+                if taken:
+                    self.held.add(study_id)
+            if taken:
                 logger.info("study %s: now driven by %s", study_id, self.leases.owner)
                 self._watch(study_id)
-                self.held.add(study_id)
         for study_id in sorted(stopping & self.held):
             self._step(study_id, 0)  # withdraws its queued and running trials
         for study_id in sorted(self.held - active - stopping):
@@ -227,20 +239,34 @@ class DriverLoop:
             else:
                 self.store.mark_running(trial_id, worker)
 
-    def _renew(self) -> None:
-        now = time.monotonic()
-        if now - self._last_renew < self.leases.renew_every_s:
-            return
-        self._last_renew = now
-        for study_id in sorted(self.held):
-            if not self.leases.renew(study_id):
-                logger.warning("study %s: lease lost to another service; no longer driving it", study_id)
-                self.held.discard(study_id)
-                self._unwatch(study_id)
+    def _beat(self) -> None:
+        """The heartbeat thread: renew every held lease a few times per TTL."""
+        while not self._stop.wait(self.leases.renew_every_s):
+            try:
+                self.renew_leases()
+            except Exception:  # an outage: the next beat retries, the loop reports it too
+                logger.exception("service: renewing leases failed; retrying")
+
+    def renew_leases(self) -> None:
+        """Extend our leases; a lease another process holds now is lost, and the loop thread
+        stops driving that study at its next tick."""
+        with self._lease_lock:
+            for study_id in sorted(self.held):
+                if not self.leases.renew(study_id):
+                    logger.warning("study %s: lease lost to another service; no longer driving it", study_id)
+                    self.held.discard(study_id)
+                    self._lost.add(study_id)
+
+    def _forget_lost(self) -> None:
+        with self._lease_lock:
+            lost, self._lost = self._lost, set()
+        for study_id in sorted(lost):
+            self._unwatch(study_id)
 
     def _drop(self, study_id: str) -> None:
-        self.held.discard(study_id)
-        self.leases.release(study_id)
+        with self._lease_lock:
+            self.held.discard(study_id)
+            self.leases.release(study_id)
         self._unwatch(study_id)
 
     def _watch(self, study_id: str) -> None:

@@ -4,6 +4,7 @@ failure fails that study only, and cancel, pause and delete withdraw the work fr
 
 from __future__ import annotations
 
+import threading
 import time
 
 import pytest
@@ -163,3 +164,31 @@ def test_a_poll_reads_only_the_trials_written_since_the_last_and_never_a_simulat
     ]
     assert max(simulation_reads) <= 1  # the pending list; never one per polled result
     assert store.get_simulation(store.list_simulations(None, 1, 0).items[0].id).state == TrialState.DONE.value
+
+
+def test_a_step_longer_than_the_lease_keeps_the_study_with_its_driver(store):
+    """The lease is renewed on its own heartbeat: a step that takes several TTLs (a surrogate
+    fit, a starved CPU) must not let another replica take a study that is being driven."""
+    study = create(store, name="slow")
+    ttl = 0.6
+    loop = DriverLoop(store, SyntheticExecutor(per_poll=0), DatabaseLeases(store, "slow", ttl_s=ttl),
+                      poll_s=0.05, scan_every_s=0.0)
+    stepping, release = threading.Event(), threading.Event()
+    step = loop.driver.step
+
+    def slow_step(study_id, timeout):
+        stepping.set()
+        release.wait(10)
+        return step(study_id, timeout=timeout)
+
+    loop.driver.step = slow_step
+    other = DatabaseLeases(store, "other", ttl_s=ttl)
+    loop.start()
+    try:
+        assert stepping.wait(10)
+        time.sleep(4 * ttl)  # several lease periods inside one step
+        assert not other.acquire(study), "the lease lapsed while its holder was stepping the study"
+        assert study in loop.held
+    finally:
+        release.set()
+        loop.stop(timeout=10)
