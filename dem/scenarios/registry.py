@@ -10,6 +10,7 @@ A config without ``kind`` is a feeder config: studies stored before the registry
 from __future__ import annotations
 
 import importlib
+import threading
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,8 @@ DEFAULT_KIND = "feeder"
 
 _registry: dict[str, Scenario] = {}
 _loaded = False
+_loading = threading.Lock()
+_loader: int | None = None
 
 
 class UnknownScenarioError(KeyError):
@@ -31,12 +34,21 @@ class UnknownScenarioError(KeyError):
 
 
 def _load_built_ins() -> None:
-    global _loaded
-    if _loaded:
+    """Import the built-ins once. ``serve`` asks from its request threads and its driver thread
+    at once: a thread must never see the flag set before the kinds are registered."""
+    global _loaded, _loader
+    if _loaded or _loader == threading.get_ident():  # done, or a built-in asking while it loads
         return
-    _loaded = True
-    for module in BUILT_IN:
-        register(importlib.import_module(module).SCENARIO)
+    with _loading:
+        if _loaded:
+            return
+        _loader = threading.get_ident()
+        try:
+            for module in BUILT_IN:
+                register(importlib.import_module(module).SCENARIO)
+            _loaded = True
+        finally:
+            _loader = None
 
 
 def register(scenario: Scenario) -> Scenario:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
 import sys
 
 import pytest
@@ -171,3 +172,22 @@ def _control():
     from dem.scenarios.base import RunControl
 
     return RunControl()
+
+
+def test_threads_asking_at_once_all_see_every_built_in_kind():
+    """``serve`` asks from request threads and its driver thread at once, in a fresh process."""
+    script = (
+        "import threading\n"
+        "from dem.scenarios import registry\n"
+        "seen, start = [], threading.Barrier(8)\n"
+        "def ask():\n"
+        "    start.wait()\n"
+        "    seen.append(registry.kinds())\n"
+        "threads = [threading.Thread(target=ask) for _ in range(8)]\n"
+        "[t.start() for t in threads]\n"
+        "[t.join() for t in threads]\n"
+        "print(*map(len, seen))\n"
+    )
+    for _ in range(3):
+        out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+        assert out.stdout.split() == [str(len(registry.BUILT_IN))] * 8, out.stdout
