@@ -4,11 +4,19 @@ trial list of a study with 10,000 trials, over loopback, from a uvicorn server i
     python benchmarks/api_load.py                      # SQLite in a temporary directory
     python benchmarks/api_load.py --database-url postgresql://postgres@127.0.0.1:5432/bench
     python benchmarks/api_load.py --think-ms 1000      # dashboard-like polling, one request/s/client
+    python -m benchmarks.api_load --dashboard --think-ms 1000 --results-per-s 2
 
 Clients run closed-loop by default (each sends its next request as soon as the previous answer
 arrives), which measures the server's capacity; with ``--think-ms`` each client waits between
 requests, which is what 50 open dashboards do. Prints p50/p99 latency per endpoint and req/s.
 Goal: p99 under 50 ms.
+
+``--dashboard`` makes each client poll what the study page polls (``api/dashboard/static/
+study.js``): the study, the trials changed since its last poll (``updated_since``), and, when
+something changed, the recommendation, progress and identifiability. ``--results-per-s`` stands
+for running workers: a writer process adds and finishes that many trials a second through the
+store, so every poll sees changes and every per-study cache is invalidated as in production.
+Goal (issue 14): p99 under 100 ms with 50 clients polling every second while workers run.
 """
 
 from __future__ import annotations
@@ -115,16 +123,82 @@ async def wait_ready(base: str, timeout: float = 60.0) -> None:
     raise SystemExit("the server did not become healthy in time")
 
 
-async def load(base: str, study_id: str, token: str, clients: int, seconds: float, think: float) -> dict:
+def write_results(url: str, study_id: str, per_s: float, stop: float, batch: int = 20) -> None:
+    """Stand-in for running workers, written as the driver writes: a batch of trials queued at
+    once (a new version of the study's views), then run and finished, ``per_s`` a second."""
+    from api.db import create_db_engine
+    from api.store import SqlStore
+    from dem.result import SimulationResult, SimulationStatus
+    from optimizer.protocols import TrialOutcome, TrialSpec, trial_id
+
+    store = SqlStore(create_db_engine(url))
+    rng = random.Random(2)
+    individual = N_TRIALS
+    while time.time() < stop:
+        specs = [
+            TrialSpec(trial_id(study_id, i, 0), study_id, i, i // 100, 0, i,
+                      {"E": 10 ** rng.uniform(5, 9), "nu": 0.3, "e": 0.5, "mu": rng.uniform(0.05, 1)}, {})
+            for i in range(individual, individual + batch)
+        ]
+        individual += batch
+        store.add_trials(specs)
+        store.mark_queued([spec.trial_id for spec in specs])
+        for spec in specs:
+            store.mark_running(spec.trial_id, worker="bench")
+            time.sleep(1.0 / per_s)
+            result = SimulationResult(status=SimulationStatus.OK, n_items=30, n_remaining=rng.randint(0, 30),
+                                      wall_time_s=rng.uniform(20, 400))
+            store.record_result(TrialOutcome(spec.trial_id, result, worker="bench"))
+            if time.time() >= stop:
+                return
+
+
+async def load(
+    base: str, study_id: str, token: str, clients: int, seconds: float, think: float, dashboard: bool = False
+) -> dict:
     import httpx
 
     headers = {"Authorization": f"Bearer {token}"}
-    latencies: dict[str, list[float]] = {"pareto": [], "trials": []}
+    kinds = ["study", "trials", "recommendation", "progress", "identifiability"] if dashboard else [
+        "pareto", "trials"]
+    latencies: dict[str, list[float]] = {kind: [] for kind in kinds}
     errors = 0
     limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
 
+    async def timed(client: httpx.AsyncClient, kind: str, path: str, params=None) -> httpx.Response:
+        nonlocal errors
+        start = time.perf_counter()
+        response = await client.get(path, params=params, headers=headers)
+        latencies[kind].append(time.perf_counter() - start)
+        if response.status_code != 200:
+            errors += 1
+        return response
+
+    async def dashboard_loop(index: int, client: httpx.AsyncClient, stop: float) -> None:
+        rng = random.Random(index)
+        study = f"/api/v1/studies/{study_id}"
+        # A page already open: its first full load is done, it polls for changes from now on.
+        cursor = (await client.get(f"{study}/trials", params={"limit": 1}, headers=headers)).json()[
+            "server_time"]
+        await asyncio.sleep(think * rng.uniform(0, 1))
+        while time.monotonic() < stop:
+            await timed(client, "study", study)
+            page = (await timed(client, "trials", f"{study}/trials",
+                                {"limit": 5000, "offset": 0, "updated_since": cursor})).json()
+            cursor = page["server_time"]
+            if page["items"]:
+                await asyncio.gather(
+                    timed(client, "recommendation", f"{study}/recommendation"),
+                    timed(client, "progress", f"{study}/progress"),
+                    timed(client, "identifiability", f"{study}/identifiability"),
+                )
+            await asyncio.sleep(think * rng.uniform(0.5, 1.5))
+
     async def client_loop(index: int, client: httpx.AsyncClient, stop: float) -> None:
         nonlocal errors
+        if dashboard:
+            await dashboard_loop(index, client, stop)
+            return
         rng = random.Random(index)
         if think:
             # Dashboards do not poll in lock step: spread the clients' first requests over one
@@ -146,9 +220,14 @@ async def load(base: str, study_id: str, token: str, clients: int, seconds: floa
                 await asyncio.sleep(think * rng.uniform(0.5, 1.5))
 
     async with httpx.AsyncClient(base_url=base, limits=limits, timeout=30) as client:
+        if dashboard:  # the pages are open already: their first load built the study's views
+            for view in ("", "/recommendation", "/progress", "/identifiability"):
+                (await client.get(f"/api/v1/studies/{study_id}{view}", headers=headers, timeout=300)
+                 ).raise_for_status()
         warm_stop = time.monotonic() + 2.0
         await asyncio.gather(*(client_loop(i, client, warm_stop) for i in range(clients)))
-        latencies = {"pareto": [], "trials": []}
+        for values in latencies.values():
+            values.clear()
         started = time.monotonic()
         stop = started + seconds
         await asyncio.gather(*(client_loop(i, client, stop) for i in range(clients)))
@@ -169,6 +248,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=15.0)
     parser.add_argument("--think-ms", type=float, default=0.0, help="pause between a client's requests")
     parser.add_argument("--server-workers", type=int, default=1, help="uvicorn worker processes")
+    parser.add_argument("--dashboard", action="store_true", help="poll what the study page polls")
+    parser.add_argument("--results-per-s", type=float, default=0.0,
+                        help="trials finished per second meanwhile (running workers)")
     args = parser.parse_args()
 
     workdir = tempfile.mkdtemp(prefix="demcal-bench-")
@@ -189,20 +271,38 @@ def main() -> None:
     port = _free_port()
     server = serve(url, port, args.server_workers)
     base = f"http://127.0.0.1:{port}"
+    writer = None
     try:
         asyncio.run(wait_ready(base))
+        if args.results_per_s:
+            import multiprocessing
+
+            until = time.time() + args.seconds + 10
+            writer = multiprocessing.get_context("spawn").Process(
+                target=write_results, args=(url, study_id, args.results_per_s, until)
+            )
+            writer.start()
         result = asyncio.run(
-            load(base, study_id, token, args.clients, args.seconds, args.think_ms / 1000.0)
+            load(base, study_id, token, args.clients, args.seconds, args.think_ms / 1000.0, args.dashboard)
         )
     finally:
+        if writer is not None:
+            writer.terminate()
+            writer.join(10)
         server.terminate()
         server.wait(timeout=10)
 
     everything = [v for values in result["latencies"].values() for v in values]
-    mode = "closed loop" if not args.think_ms else f"think time {args.think_ms:g} ms"
+    mode = ("dashboard polls, " if args.dashboard else "") + (
+        "closed loop" if not args.think_ms else f"think time {args.think_ms:g} ms")
+    if args.results_per_s:
+        mode += f", {args.results_per_s:g} results/s written meanwhile"
     print(f"{args.clients} clients, {mode}, {args.server_workers} server worker(s), "
           f"{result['elapsed']:.1f} s")
     for kind, values in [*result["latencies"].items(), ("all", everything)]:
+        if not values:
+            print(f"  {kind:7s} n=     0")
+            continue
         print(
             f"  {kind:7s} n={len(values):6d}  p50={_percentile(values, 50) * 1000:7.1f} ms  "
             f"p99={_percentile(values, 99) * 1000:7.1f} ms"

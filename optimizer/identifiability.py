@@ -37,6 +37,11 @@ PINNED_TOTAL = 0.1
 IGNORED_TOTAL = 0.02
 PINNED_SPREAD = 0.5
 BASE_SAMPLES = 1024  # Saltelli's N: N (d + 2) predictions of the surrogate's mean
+# The exact GP costs n^3 per likelihood evaluation: fitted on all 10,000 simulations of a long
+# study it ran for minutes (benchmarks/api_load.py, --dashboard), while a dashboard waited. A
+# smooth response of four parameters is resolved by a few hundred points, so larger studies are
+# fitted on an even random subsample of this size (fixed seed: the same answer every time).
+MAX_GP_POINTS = 500
 
 
 def sobol_indices(function, n_genes: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -83,6 +88,9 @@ def identifiability(evaluations: Sequence[Evaluation], space: ParameterSpace, to
     if np.ptp(values) == 0:
         result["reason"] = f"every simulation gave N_t = {rows[0][1]}: the response does not vary"
         return result
+    if len(genes) > MAX_GP_POINTS:
+        pick = np.sort(np.random.default_rng(0).choice(len(genes), MAX_GP_POINTS, replace=False))
+        genes, values = genes[pick], values[pick]
     with one_blas_thread():
         model = fit_gp(genes, values, random_state=0)
         first, total = sobol_indices(model.predict, space.n_genes)

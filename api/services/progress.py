@@ -31,7 +31,8 @@ def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, princip
         progress = study_progress(store.trials(study_id), definition, record.generation, validation)
         return StudyProgressRead(study_id=study_id, **progress.as_json()).model_dump_json().encode()
 
-    return views.get_or_build("progress", study_id, (study.updated_at, study.generation), build)
+    version = (study.updated_at, study.generation)
+    return views.get_or_build("progress", study_id, version, build, stale_ok=True)
 
 
 def identifiability_json(
@@ -46,4 +47,5 @@ def identifiability_json(
         result = identifiability(evaluations, space, definition.experiment.tolerance)
         return IdentifiabilityRead(study_id=study_id, **result).model_dump_json().encode()
 
-    return views.get_or_build("identifiability", study_id, (study.updated_at, study.generation), build)
+    version = (study.updated_at, study.generation)
+    return views.get_or_build("identifiability", study_id, version, build, stale_ok=True)

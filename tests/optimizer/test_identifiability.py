@@ -60,3 +60,21 @@ def test_too_few_or_constant_simulations_say_why():
     ]
     result = identifiability(flat, space, 0.5)
     assert "does not vary" in result["reason"] and result["parameters"] == []
+
+
+def test_a_large_study_is_assessed_from_a_bounded_subsample_with_the_same_verdicts(monkeypatch):
+    import optimizer.identifiability as module
+
+    fitted = []
+    fit = module.fit_gp
+    monkeypatch.setattr(module, "fit_gp", lambda genes, values, **kw: fitted.append(len(genes)) or fit(
+        genes, values, **kw))
+    evaluations, space = synthetic_study(5 * module.MAX_GP_POINTS)
+
+    result = identifiability(evaluations, space, tolerance=0.5)
+
+    assert fitted == [module.MAX_GP_POINTS]
+    assert result["simulations"] == 5 * module.MAX_GP_POINTS  # every simulation is counted
+    by_name = {row["name"]: row for row in result["parameters"]}
+    assert by_name["nu"]["total"] < 0.02 and by_name["E"]["total"] < 0.02
+    assert by_name["mu"]["total"] > by_name["e"]["total"] > 0.02

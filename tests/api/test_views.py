@@ -1,0 +1,72 @@
+"""The per-study view cache: one build per version however many requests ask at once, and views
+that may lag a version served from the previous one while the next is built."""
+
+from __future__ import annotations
+
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+from api.services.views import StudyViewCache
+
+
+def test_concurrent_requests_for_a_new_version_build_it_once():
+    views, builds = StudyViewCache(), []
+
+    def build() -> bytes:
+        builds.append(1)
+        time.sleep(0.3)  # an expensive view (identifiability): long enough for every request to ask
+        return b"v1"
+
+    with ThreadPoolExecutor(8) as pool:
+        bodies = list(pool.map(lambda _: views.get_or_build("identifiability", "s1", 1, build), range(8)))
+
+    assert bodies == [b"v1"] * 8
+    assert len(builds) == 1
+
+
+def test_a_view_that_may_lag_is_served_stale_while_its_next_version_builds():
+    views, release = StudyViewCache(), threading.Event()
+    views.get_or_build("progress", "s1", 1, lambda: b"v1", stale_ok=True)
+
+    def slow() -> bytes:
+        release.wait(10)
+        return b"v2"
+
+    started = time.monotonic()
+    during = [views.get_or_build("progress", "s1", 2, slow, stale_ok=True) for _ in range(3)]
+    waited = time.monotonic() - started
+    release.set()
+    deadline = time.monotonic() + 10
+    while views.get_or_build("progress", "s1", 2, slow, stale_ok=True) != b"v2":
+        assert time.monotonic() < deadline, "the background build never landed"
+        time.sleep(0.01)
+
+    assert during == [b"v1"] * 3
+    assert waited < 1.0
+
+
+def test_a_view_that_must_be_current_waits_for_its_build():
+    views = StudyViewCache()
+    views.get_or_build("pareto", "s1", 1, lambda: b"v1")
+
+    assert views.get_or_build("pareto", "s1", 2, lambda: b"v2") == b"v2"
+
+
+def test_a_failed_build_is_raised_to_its_requests_and_tried_again_by_the_next():
+    views, attempts = StudyViewCache(), []
+
+    def flaky() -> bytes:
+        attempts.append(1)
+        if len(attempts) == 1:
+            raise RuntimeError("database went away")
+        return b"v1"
+
+    try:
+        views.get_or_build("pareto", "s1", 1, flaky)
+    except RuntimeError as exc:
+        assert "went away" in str(exc)
+    else:
+        raise AssertionError("the build's error was swallowed")
+
+    assert views.get_or_build("pareto", "s1", 1, flaky) == b"v1"
