@@ -42,9 +42,9 @@ def list_studies(
 
 
 @router.get("/{study_id}", response_model=StudyRead)
-def get_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
+def get_study(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
     """A study with its progress (trials done / total, generation) and best trial so far."""
-    return studies.get_study(store, study_id, principal)
+    return studies.get_study(store, study_id, principal, views)
 
 
 @router.post("/{study_id}/pause", response_model=StudyRead)

@@ -169,3 +169,23 @@ def test_cached_trial_total_follows_new_trials(client, keys, store):
     after = client.get(url, headers=keys.auth()).json()["total"]
 
     assert after == before + 1
+
+
+def test_polling_a_study_ranks_its_best_trial_once_per_version(client, keys, store, monkeypatch):
+    from api.store import SqlStore
+
+    study_id = _run(store)
+    ranked = []
+    best_trial = SqlStore.best_trial
+    monkeypatch.setattr(SqlStore, "best_trial", lambda self, sid: ranked.append(sid) or best_trial(self, sid))
+
+    polls = [client.get(f"/api/v1/studies/{study_id}", headers=keys.auth()).json()["best"] for _ in range(5)]
+    record = store.load_study(study_id)
+    pareto = [trial.spec.trial_id for trial in store.trials(study_id)][:1]
+    store.save_generation(study_id, record.generation, b"state", pareto, record.recommendation, objectives={})
+    after = client.get(f"/api/v1/studies/{study_id}", headers=keys.auth()).json()["best"]
+
+    assert polls[0]["id"] == best_trial(store, study_id).id
+    assert all(poll == polls[0] for poll in polls)
+    assert after["id"] == polls[0]["id"]
+    assert ranked == [study_id, study_id]  # once for the five polls, once after the new generation
