@@ -44,7 +44,6 @@ from optimizer.protocols import (
     StudyStatus,
     TrialOutcome,
     TrialSpec,
-    is_trial_of,
 )
 
 logger = logging.getLogger(__name__)
@@ -182,7 +181,7 @@ class DriverLoop:
             progress = self.driver.step(study_id, timeout=timeout)
         except NotFoundError:
             logger.info("study %s: deleted; withdrawing its work", study_id)
-            self._withdraw(study_id)
+            self.driver.withdraw(study_id)
             self._drop(study_id)
             return
         except INFRASTRUCTURE_ERRORS:
@@ -191,22 +190,14 @@ class DriverLoop:
             logger.exception("study %s: the driver failed on it; failing this study only", study_id)
             message = f"the driver failed on this study: {type(exc).__name__}: {exc}"
             self.store.set_status(study_id, StudyStatus.FAILED, message[:2000])
-            self._withdraw(study_id)
+            self.driver.withdraw(study_id)
             self._drop(study_id)
             return
         if not progress.active:
             logger.info("study %s: %s; releasing it", study_id, progress.status)
             if progress.status is not StudyStatus.DONE:
-                self._withdraw(study_id)
+                self.driver.withdraw(study_id)
             self._drop(study_id)
-
-    def _withdraw(self, study_id: str) -> None:
-        """Remove the study's queued jobs and stop its running ones, from what the executor holds
-        (not what the store says: the study may be deleted, its trials marked cancelled)."""
-        doomed = sorted(trial for trial in self.executor.in_flight() if is_trial_of(trial, study_id))
-        if doomed:
-            logger.info("study %s: withdrawing %d queued or running trials", study_id, len(doomed))
-            self.executor.cancel(doomed)
 
     def _scan(self) -> None:
         """Take leases of active studies nobody drives; let go of studies that stopped."""

@@ -68,6 +68,7 @@ from optimizer.protocols import (
     TrialRecord,
     TrialSpec,
     TrialState,
+    is_trial_of,
     study_of,
     trial_id,
 )
@@ -211,8 +212,9 @@ class Driver:
             message = f"the stored definition is invalid: {describe_validation_error(exc)}"
             self.store.set_status(study_id, StudyStatus.FAILED, message)
             return self._progress(self.store.load_study(study_id), None, 0)
-        if study.status in STOPPING_STUDIES:
-            self._withdraw(study_id)
+        sent = study_id in self._last_reconcile or study_id in self._batches
+        if study.status in STOPPING_STUDIES and sent:
+            self.withdraw(study_id)  # once, when this driver had sent its work
         if study.status not in ACTIVE_STUDIES:
             self._known.pop(study_id, None)
             return self._progress(study, self._read(study_id, context), 0)
@@ -516,18 +518,17 @@ class Driver:
                     self.store.mark_queued(ids)
             known.queued(to_send)
 
-    def _withdraw(self, study_id: str) -> None:
-        """Stop a paused or cancelled study's work; on resume, reconciliation re-sends it."""
-        if study_id in self._last_reconcile or study_id in self._batches:
-            # Cancelling marks queued and running trials ``cancelled`` in the store at once; the
-            # executor may still hold or run them, so they are withdrawn too.
-            withdraw = (*IN_FLIGHT, TrialState.CANCELLED)
-            in_flight = [record.spec.trial_id for record in self.store.trials(study_id, withdraw)]
-            if in_flight:
-                self.executor.cancel(in_flight)
-            self._last_reconcile.pop(study_id, None)
-            self._batches.pop(study_id, None)
-            self._known.pop(study_id, None)
+    def withdraw(self, study_id: str) -> None:
+        """Stop a study's queued and running trials as the executor holds them (the store may
+        have marked them cancelled, or deleted the study) and forget what this driver knew of it;
+        on resume, reconciliation sends its unfinished trials again."""
+        doomed = sorted(trial for trial in self.executor.in_flight() if is_trial_of(trial, study_id))
+        if doomed:
+            logger.info("study %s: withdrawing %d queued or running trials", study_id, len(doomed))
+            self.executor.cancel(doomed)
+        self._last_reconcile.pop(study_id, None)
+        self._batches.pop(study_id, None)
+        self._known.pop(study_id, None)
 
     # -- reporting ------------------------------------------------------------------------------
 

@@ -78,41 +78,30 @@ class TrialStore(StoreBase):
 
     def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
         """Queued; ``message`` says why they may wait (no worker has their engine yet)."""
-        with self.session() as s:
-            for chunk in chunks(list(trial_ids), 500):
-                s.execute(
-                    sa.update(TrialRow)
-                    .where(
-                        TrialRow.id.in_(chunk),
-                        TrialRow.state.in_([TrialState.PENDING.value, TrialState.QUEUED.value]),
-                    )
-                    .values(state=TrialState.QUEUED.value, attempts=TrialRow.attempts + 1, message=message,
-                            updated_at=utcnow())
-                )
+        self._move(
+            trial_ids, (TrialState.PENDING, TrialState.QUEUED),
+            state=TrialState.QUEUED.value, attempts=TrialRow.attempts + 1, message=message,
+        )
 
     def mark_running(self, trial_id: str, worker: str | None = None) -> None:
-        with self.session() as s:
-            now = utcnow()
-            s.execute(
-                sa.update(TrialRow)
-                .where(
-                    TrialRow.id == trial_id,
-                    TrialRow.state.in_([TrialState.PENDING.value, TrialState.QUEUED.value]),
-                )
-                .values(state=TrialState.RUNNING.value, worker=worker, started_at=now, updated_at=now)
-            )
+        self._move(
+            [trial_id], (TrialState.PENDING, TrialState.QUEUED),
+            state=TrialState.RUNNING.value, worker=worker, started_at=utcnow(),
+        )
 
     def requeue(self, trial_ids: Sequence[str]) -> None:
         """Send trials lost in flight (queued or running, unknown to the executor) back to pending."""
+        self._move(trial_ids, (TrialState.QUEUED, TrialState.RUNNING), state=TrialState.PENDING.value)
+
+    def _move(self, trial_ids: Sequence[str], from_states: Sequence[TrialState], **values) -> None:
+        """The trials among ``trial_ids`` in one of ``from_states`` get ``values``: the database
+        decides, so a trial that moved on meanwhile (done, cancelled) is left as it is."""
         with self.session() as s:
             for chunk in chunks(list(trial_ids), 500):
                 s.execute(
                     sa.update(TrialRow)
-                    .where(
-                        TrialRow.id.in_(chunk),
-                        TrialRow.state.in_([TrialState.QUEUED.value, TrialState.RUNNING.value]),
-                    )
-                    .values(state=TrialState.PENDING.value, updated_at=utcnow())
+                    .where(TrialRow.id.in_(chunk), TrialRow.state.in_([st.value for st in from_states]))
+                    .values(updated_at=utcnow(), **values)
                 )
 
     def record_result(self, outcome: TrialOutcome) -> bool:
