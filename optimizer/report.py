@@ -1,10 +1,11 @@
 """A study's results for people: ``trials.csv``, ``summary.json`` and ``pareto.png``.
 
 The summary carries what an engineer reads first: the recommendation and its equivalent sets,
-the Pareto front, the paper's Fig. 5 as numbers (median and spread of N_t and of f2 per
-generation), how many simulations it took until a parameter set first matched the experiment, and
-the runs that measured nothing, counted by status (``optimizer/outcomes.py``): they never appear
-as an N_t value, in the CSV, the summary or the pictures, and every view counts them the same way.
+the Pareto front, the paper's Fig. 5 as numbers (``optimizer/generations.py``, the same summary
+the API serves, plus the spread of f2 per generation), how many simulations it took until a
+parameter set first matched the experiment, and the runs that measured nothing, counted by
+status (``optimizer/outcomes.py``): they never appear as an N_t value, in the CSV, the summary or
+the pictures, and every view counts them the same way.
 It also carries the progress against simulations (hypervolume and best f1 per batch,
 ``optimizer/progress.py``) and which parameters the experiment pins down
 (``optimizer/identifiability.py``).
@@ -18,10 +19,10 @@ from __future__ import annotations
 
 import csv
 import json
-import statistics
 from pathlib import Path
 from typing import Any
 
+from optimizer.generations import Run, per_generation, spread
 from optimizer.identifiability import identifiability
 from optimizer.objectives import Evaluation, evaluate, f1_rule
 from optimizer.outcomes import (
@@ -99,12 +100,6 @@ def first_match(
     return None
 
 
-def _spread(values: list[float]) -> dict[str, float] | None:
-    if not values:
-        return None
-    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
-
-
 def _measured(record: TrialRecord, response: str = "n_remaining") -> float | None:
     """A run's value of ``response``, only if it measured (ended ok)."""
     result = record.result
@@ -137,28 +132,17 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
     space = ParameterSpace(definition.parameters)
     evaluations = evaluate(records, definition, definition.n_items())
     ranking = rank(evaluations, definition.match_tolerance(), space, min_replicates=definition.max_replicates)
-    runs_by_generation: dict[int, list[TrialRecord]] = {}
-    for record in records:
-        if record.result is not None:
-            runs_by_generation.setdefault(record.spec.generation, []).append(record)
-    generations = []
     # Every batch with runs, so that the failed runs per batch add up to the study's count (extra
     # replicates and a validation are batches without new individuals).
-    for generation in sorted({ev.generation for ev in evaluations} | set(runs_by_generation)):
-        members = [ev for ev in evaluations if ev.generation == generation and ev.ok]
-        runs = runs_by_generation.get(generation, [])
-        failed = count_failures(record.result.status.value for record in runs)
-        generations.append(
-            {
-                "generation": generation,
-                "individuals": sum(ev.generation == generation for ev in evaluations),
-                "simulations": len(runs),
-                "failed": failed.total,
-                "failed_by_status": failed.by_status,
-                "n_remaining": _spread([n for n in (_measured(record) for record in runs) if n is not None]),
-                "f2": _spread([ev.f2 for ev in members]),
-            }
-        )
+    generations = [
+        {
+            **entry,
+            "individuals": sum(ev.generation == entry["generation"] for ev in evaluations),
+            "simulations": entry["done"],
+            "f2": spread(ev.f2 for ev in evaluations if ev.generation == entry["generation"] and ev.ok),
+        }
+        for entry in per_generation(Run.of(record) for record in records if record.result is not None)
+    ]
     return {
         "study_id": study.study_id,
         "name": definition.name,

@@ -1,5 +1,5 @@
 """Trials of a study as clients read them: pages, one trial, the Pareto front, the per-generation
-summary (median and spread of N_t and T per generation: the paper's Fig. 5), the recommendation
+summary (the paper's Fig. 5, computed by ``optimizer/generations.py``), the recommendation
 with its equivalent sets, and CSV/JSON exports.
 
 The two reads every dashboard polls, the trial page and the Pareto front, return JSON bytes:
@@ -21,8 +21,6 @@ import io
 import math
 from collections.abc import Iterator
 
-import numpy as np
-
 from api.auth import Principal
 from api.models import TrialRow, decode_value, utcnow
 from api.schemas import (
@@ -30,7 +28,6 @@ from api.schemas import (
     ParetoFront,
     ParetoPoint,
     RecommendationRead,
-    Spread,
     TrialDetail,
     TrialPage,
     TrialRead,
@@ -39,8 +36,9 @@ from api.schemas import (
 from api.services.generations import latest_generation
 from api.services.views import StudyViewCache
 from api.store import SqlStore, TrialFilter
-from optimizer.outcomes import count_failures, individual_failures, is_failed, measured_n
-from optimizer.protocols import PARAMETER_NAMES, StudyStatus
+from optimizer.generations import Run, per_generation
+from optimizer.outcomes import individual_failures, is_failed, measured_n
+from optimizer.protocols import PARAMETER_NAMES, StudyStatus, TrialState
 from optimizer.study import StudyDefinition
 
 CSV_COLUMNS = (
@@ -161,38 +159,15 @@ def _sort_key(value: float | None) -> float:
     return math.inf if value is None else value
 
 
-def _spread(values: list[float]) -> Spread | None:
-    if not values:
-        return None
-    q1, median, q3 = np.percentile(values, [25, 50, 75])
-    return Spread(
-        median=float(median), q1=float(q1), q3=float(q3), min=float(min(values)), max=float(max(values))
-    )
-
-
 def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> list[GenerationSummary]:
+    """``optimizer/generations.py`` on the stored rows (objectives as stored)."""
     store.get_study(study_id, principal.visible_to)
-    by_generation: dict[int, list] = {}
-    for row in store.trial_columns(study_id):
-        by_generation.setdefault(row.generation, []).append(row)
-    summaries = []
-    for generation, rows in sorted(by_generation.items()):
-        done = [row for row in rows if row.state == "done"]
-        ok = [row for row in done if not is_failed(row.status)]
-        failed = count_failures(row.status for row in done)
-        f1_values = [f1 for f1 in (_objectives(row)[0] for row in done) if f1 is not None]
-        summaries.append(
-            GenerationSummary(
-                generation=generation, trials=len(rows), done=len(done), ok=len(ok),
-                failed=failed.total, failed_by_status=failed.by_status,
-                n_remaining=_spread([row.n_remaining for row in ok if row.n_remaining is not None]),
-                responses=_response_spreads(ok),
-                wall_time_s=_spread([row.wall_time_s for row in ok if row.wall_time_s is not None]),
-                cost=_spread([row.cost for row in ok if row.cost is not None]),
-                best_f1=min(f1_values) if f1_values else None,
-            )
-        )
-    return summaries
+    runs = (
+        Run(row.generation, row.status if row.state == TrialState.DONE.value else None, row.responses or {},
+            row.wall_time_s, row.cost, _objectives(row)[0])
+        for row in store.trial_columns(study_id)
+    )
+    return [GenerationSummary.model_validate(entry) for entry in per_generation(runs)]
 
 
 def recommendation(store: SqlStore, study_id: str, principal: Principal) -> RecommendationRead:
@@ -213,15 +188,6 @@ def recommendation(store: SqlStore, study_id: str, principal: Principal) -> Reco
         study_id=study_id, status=StudyStatus(study.status), recommendation=study.recommendation,
         equivalent=equivalent,
     )
-
-
-def _response_spreads(rows) -> dict[str, Spread]:
-    values: dict[str, list[float]] = {}
-    for row in rows:
-        for name, value in (row.responses or {}).items():
-            if value is not None:
-                values.setdefault(name, []).append(value)
-    return {name: _spread(found) for name, found in values.items()}
 
 
 def export_rows(store: SqlStore, study_id: str, principal: Principal) -> list[dict]:

@@ -57,6 +57,8 @@ def test_every_view_counts_failed_runs_alike_and_shows_no_n_t_for_them(client, k
         per_generation.update(entry["failed_by_status"])
     assert per_generation == truth
     assert [g["failed"] for g in summary["generations"]] == [g["failed"] for g in generations]
+    for key in ("n_remaining", "responses", "wall_time_s", "cost"):  # one summary, two views
+        assert [g[key] for g in summary["generations"]] == [g[key] for g in generations]
     for rows in (report_csv, api_csv):
         shown = Counter(row["status"] for row in rows if row["status"] != "ok")
         assert shown == truth

@@ -90,7 +90,8 @@ def test_failed_runs_are_counted_by_status_and_never_shown_as_n_t(tmp_path, smal
     for entry in summary["generations"]:  # Fig. 5's numbers come from the ok runs alone
         generation = [r for r in records if r.spec.generation == entry["generation"]]
         ok = [r.result.n_remaining for r in generation if r.result.ok]
-        assert entry["n_remaining"] == {"median": statistics.median(ok), "min": min(ok), "max": max(ok)}
+        shown = {key: entry["n_remaining"][key] for key in ("median", "min", "max")}
+        assert shown == {"median": statistics.median(ok), "min": min(ok), "max": max(ok)}
     assert all(not member["failure"] for member in summary["pareto"])
 
 

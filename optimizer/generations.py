@@ -1,0 +1,79 @@
+"""The per-generation summary (the paper's Fig. 5), in one place for the API's
+``GET /studies/{id}/generations`` and the results folder's ``summary.json``: for each batch, its
+runs, how many finished, measured and failed (by status), and the median and spread of each
+response, the wall time and the cost over the runs that measured (a failed run's values are
+where it stopped, never a measurement), with the best f1 stored for its runs.
+
+Pure arithmetic on plain runs, so the store's rows and the optimiser's trial records both feed
+it; it must not read stores.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dem.result import SimulationStatus
+from optimizer.outcomes import count_failures
+from optimizer.protocols import TrialRecord
+
+
+@dataclass(frozen=True)
+class Run:
+    """One trial as the summary needs it; ``status`` is None until the run finished."""
+
+    generation: int
+    status: str | None
+    responses: Mapping[str, float | None] = field(default_factory=dict)
+    wall_time_s: float | None = None
+    cost: float | None = None
+    f1: float | None = None  # the objective stored for it (None for a failed set's runs)
+
+    @classmethod
+    def of(cls, record: TrialRecord) -> Run:
+        result = record.result
+        if result is None:
+            return cls(record.spec.generation, None)
+        status = result.status.value
+        return cls(record.spec.generation, status, result.responses, result.wall_time_s, result.cost)
+
+
+def spread(values: Iterable[float]) -> dict[str, float] | None:
+    """Median, quartiles and range; None for no values."""
+    values = list(values)
+    if not values:
+        return None
+    q1, median, q3 = np.percentile(values, [25, 50, 75])
+    return {"median": float(median), "q1": float(q1), "q3": float(q3), "min": float(min(values)),
+            "max": float(max(values))}
+
+
+def per_generation(runs: Iterable[Run]) -> list[dict[str, Any]]:
+    """One entry per generation that has runs, in order (see the module docstring)."""
+    by_generation: dict[int, list[Run]] = {}
+    for run in runs:
+        by_generation.setdefault(run.generation, []).append(run)
+    summaries = []
+    for generation, group in sorted(by_generation.items()):
+        done = [run for run in group if run.status is not None]
+        ok = [run for run in done if run.status == SimulationStatus.OK.value]
+        failed = count_failures(run.status for run in done)
+        measured: dict[str, list[float]] = {}
+        for run in ok:
+            for name, value in run.responses.items():
+                if value is not None:
+                    measured.setdefault(name, []).append(value)
+        f1_values = [run.f1 for run in done if run.f1 is not None]
+        summaries.append({
+            "generation": generation, "trials": len(group), "done": len(done), "ok": len(ok),
+            "failed": failed.total, "failed_by_status": failed.by_status,
+            "n_remaining": spread(measured.get("n_remaining", [])),
+            "responses": {name: spread(values) for name, values in measured.items()},
+            "wall_time_s": spread(run.wall_time_s for run in ok if run.wall_time_s is not None),
+            "cost": spread(run.cost for run in ok if run.cost is not None),
+            "best_f1": min(f1_values, default=None),
+        })
+    return summaries
