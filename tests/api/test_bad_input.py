@@ -152,3 +152,24 @@ def test_an_unknown_key_names_the_nearest_valid_one_and_the_path_once(client, ke
 
     assert response.status_code == 422, response.text
     assert response.json()["detail"] == expected
+
+
+@pytest.mark.parametrize(
+    ("scenario", "expected"),
+    [
+        ({"kind": "angle_of_repose", "cylinder": {"height": -1}}, "scenario.cylinder.height: Input"),
+        ({"kind": "angle_of_repose", "tray": {"mesh_scale": 1.0}}, "scenario.tray: unknown key"),
+        ({"kind": "feeder", "cylinder": {"height": 0.1}}, "scenario.cylinder: unknown key"),
+        ({"stages": {"vibration_time": "long"}}, "scenario.stages.vibration_time: Input should be a valid"),
+        ({"kind": "drum"}, "scenario.kind: unknown scenario kind 'drum'; known kinds: angle_of_repose"),
+    ],
+)
+def test_a_bad_scenario_is_422_naming_the_field_of_its_kind(client, keys, scenario, expected):
+    study = client.post("/api/v1/studies", json=study_definition(scenario=scenario), headers=keys.auth())
+    simulation = client.post(
+        "/api/v1/simulations", json={"scenario": scenario, "params": SIMULATION_PARAMS}, headers=keys.auth()
+    )
+
+    assert study.status_code == simulation.status_code == 422, (study.text, simulation.text)
+    assert expected in study.json()["detail"]
+    assert expected in simulation.json()["detail"]

@@ -239,3 +239,15 @@ def test_the_pareto_table_title_gives_the_study_s_own_f1(tmp_path, overrides, ru
     assert f"Pareto front of {study_id} ({rule})" in cli
     summary = json.loads(next(tmp_path.glob("*/summary.json")).read_text())
     assert summary["f1_rule"] == rule.removeprefix("f1 = ")
+
+
+def test_a_bad_scenario_in_a_study_file_exits_2_naming_the_field_of_its_kind(embedded, tmp_path):
+    (tmp_path / "study.toml").write_text(
+        '[scenario]\nkind = "angle_of_repose"\n[scenario.cylinder]\nheight = -1\n'
+        "[experiment]\nmeasured = [30]\n"
+    )
+
+    result = embedded.invoke(app, ["calibrate", "study.toml"])
+
+    assert result.exit_code == 2
+    assert "scenario.cylinder.height: Input should be greater than 0" in result.output
