@@ -74,9 +74,11 @@ def _warnings(store: SqlStore, row) -> list[str]:
     stored = (row.extra or {}).get("warnings")
     if stored is None:
         try:
-            stored = study_warnings(StudyDefinition.model_validate(row.definition))
-        except ValueError:
+            definition = StudyDefinition.model_validate(row.definition)
+        except Exception:  # noqa: BLE001 - a warning must never turn a read into a 500
+            logger.warning("study %s: its stored definition no longer validates", row.id, exc_info=True)
             return []
+        stored = study_warnings(definition)
         store.keep_warnings(row.id, stored)
     return stored
 
