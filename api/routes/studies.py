@@ -94,9 +94,10 @@ def identifiability(study_id: str, principal: ApiKeyDep, store: StoreDep, views:
 
 
 @router.get("/{study_id}/recommendation", response_model=RecommendationRead)
-def recommendation(study_id: str, principal: ApiKeyDep, store: StoreDep):
+def recommendation(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
     """The recommended parameter set and every other set that matches the experiment as well."""
-    return trials.recommendation(store, study_id, principal)
+    body = trials.recommendation_json(store, views, study_id, principal)
+    return Response(body, media_type="application/json")
 
 
 @router.get(

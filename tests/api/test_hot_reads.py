@@ -189,3 +189,21 @@ def test_polling_a_study_ranks_its_best_trial_once_per_version(client, keys, sto
     assert all(poll == polls[0] for poll in polls)
     assert after["id"] == polls[0]["id"]
     assert ranked == [study_id, study_id]  # once for the five polls, once after the new generation
+
+
+def test_polling_the_recommendation_builds_it_once_per_version(client, keys, store, monkeypatch):
+    from api.store import SqlStore
+
+    study_id = _run(store, executor=SyntheticExecutor(_half_matching))
+    built = []
+    columns = SqlStore.trial_columns
+    monkeypatch.setattr(SqlStore, "trial_columns", lambda self, sid: built.append(sid) or columns(self, sid))
+    url = f"/api/v1/studies/{study_id}/recommendation"
+
+    polls = [client.get(url, headers=keys.auth()).json() for _ in range(5)]
+    store.transition(study_id, [StudyStatus.DONE], StudyStatus.DONE)  # any change to the study row
+    after = client.get(url, headers=keys.auth()).json()
+
+    assert all(poll == polls[0] for poll in polls) and polls[0]["equivalent"]
+    assert after == polls[0]
+    assert built == [study_id, study_id]  # once for the five polls, once after the row changed
