@@ -47,6 +47,7 @@ logger = logging.getLogger(__name__)
 
 GRAVITY = 9.81
 # Lattice spacing of the initial column, in largest sphere diameters (a loose, non-touching fill).
+MAX_ACROSS = 1000  # spheres across the cylinder: bounds the lattice a config may ask for
 LATTICE_SPACING = 1.1
 # The random displacement of each lattice site, as a fraction of the free space around a sphere.
 JITTER = 0.4
@@ -128,6 +129,12 @@ class HeapConfig(Section):
             )
         if self.stages.max_time <= self.stages.lift_start:
             raise ValueError("stages.max_time must be later than stages.lift_start")
+        d_max = self.particles.diameters()[-1]
+        if self.cylinder.diameter > MAX_ACROSS * d_max:  # before a lattice of that many sites is laid
+            raise ValueError(
+                f"particles.diameter = {self.particles.diameter:g} m is too small for cylinder.diameter = "
+                f"{self.cylinder.diameter:g} m: at most {MAX_ACROSS} spheres fit across the cylinder here"
+            )
         if self.particles.shape == "spheres":
             column_height(self)  # raises with the figures when the column does not fit
         return self

@@ -159,6 +159,7 @@ def test_an_unknown_key_names_the_nearest_valid_one_and_the_path_once(client, ke
     [
         ({"kind": "angle_of_repose", "cylinder": {"height": -1}}, "scenario.cylinder.height: Input"),
         ({"kind": "angle_of_repose", "tray": {"mesh_scale": 1.0}}, "scenario.tray: unknown key"),
+        ({"kind": "angle_of_repose", "particles": {"diameter": 5e-324}}, "particles.diameter = 4.94066e-324"),
         ({"kind": "feeder", "cylinder": {"height": 0.1}}, "scenario.cylinder: unknown key"),
         ({"stages": {"vibration_time": "long"}}, "scenario.stages.vibration_time: Input should be a valid"),
         ({"kind": "drum"}, "scenario.kind: unknown scenario kind 'drum'; known kinds: angle_of_repose"),
