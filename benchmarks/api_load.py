@@ -165,28 +165,37 @@ async def load(
     errors = 0
     limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
 
-    async def timed(client: httpx.AsyncClient, kind: str, path: str, params=None) -> httpx.Response:
+    async def timed(client: httpx.AsyncClient, kind: str, path: str, params=None) -> dict | None:
+        """One timed GET; its JSON, or None (counted as an error) for a failed request: a keep-alive
+        connection the server closed while the client was thinking is retried once by httpx only."""
         nonlocal errors
         start = time.perf_counter()
-        response = await client.get(path, params=params, headers=headers)
+        try:
+            response = await client.get(path, params=params, headers=headers)
+        except httpx.TransportError:
+            errors += 1
+            return None
         latencies[kind].append(time.perf_counter() - start)
         if response.status_code != 200:
             errors += 1
-        return response
+            return None
+        return response.json()
 
     async def dashboard_loop(index: int, client: httpx.AsyncClient, stop: float) -> None:
         rng = random.Random(index)
         study = f"/api/v1/studies/{study_id}"
         # A page already open: its first full load is done, it polls for changes from now on.
-        cursor = (await client.get(f"{study}/trials", params={"limit": 1}, headers=headers)).json()[
-            "server_time"]
+        cursor = None
         await asyncio.sleep(think * rng.uniform(0, 1))
         while time.monotonic() < stop:
             await timed(client, "study", study)
-            page = (await timed(client, "trials", f"{study}/trials",
-                                {"limit": 5000, "offset": 0, "updated_since": cursor})).json()
-            cursor = page["server_time"]
-            if page["items"]:
+            query = {"limit": 5000, "offset": 0} if cursor is None else {
+                "limit": 5000, "offset": 0, "updated_since": cursor}
+            page = await timed(client, "trials", f"{study}/trials", query if cursor else {"limit": 1})
+            if page is None:
+                continue
+            changed, cursor = cursor is not None and page["items"], page["server_time"]
+            if changed:
                 await asyncio.gather(
                     timed(client, "recommendation", f"{study}/recommendation"),
                     timed(client, "progress", f"{study}/progress"),
@@ -211,11 +220,7 @@ async def load(
                 offset = rng.randrange(0, N_TRIALS - 100)
                 kind, path, params = "trials", f"/api/v1/studies/{study_id}/trials", {
                     "limit": 100, "offset": offset}
-            start = time.perf_counter()
-            response = await client.get(path, params=params, headers=headers)
-            latencies[kind].append(time.perf_counter() - start)
-            if response.status_code != 200:
-                errors += 1
+            await timed(client, kind, path, params)
             if think:
                 await asyncio.sleep(think * rng.uniform(0.5, 1.5))
 
