@@ -75,6 +75,7 @@ class DemcalWorker(SimpleWorker):
 
     stop_asked = False  # a SIGTERM/SIGINT arrived: the end of the work is wanted, not an outage
     cold_stopped = False  # a second signal abandoned the running trial
+    jobs_done = 0  # trials performed by this incarnation (RQ keeps its counts only in Redis)
 
     def request_stop(self, signum, frame) -> None:
         self.stop_asked = True
@@ -103,6 +104,7 @@ class DemcalWorker(SimpleWorker):
         finally:
             done.set()
             beating.join()
+            self.jobs_done += 1
         self.set_state(WorkerStatus.IDLE)
 
     def _beat(self, job: Job, done: threading.Event) -> None:
@@ -173,13 +175,15 @@ def run_worker(
     queue_names: Sequence[str],
     *,
     burst: bool = False,
+    max_jobs: int | None = None,
     name: str | None = None,
     heartbeat_s: int = DEFAULT_HEARTBEAT_S,
     log_level: str = "INFO",
     snapshot_root: Path | None = None,
     data_dir: Path | None = None,
 ) -> bool:
-    """Work until told to stop (or, with ``burst``, until the queues are empty).
+    """Work until told to stop (or, with ``burst``, until the queues are empty; with
+    ``max_jobs``, after that many trials, counted across restarts after a Redis outage).
 
     Returns True if at least one job was performed; raises ``ColdStop`` after a cold shutdown.
     """
@@ -190,7 +194,7 @@ def run_worker(
     connection = connect(redis_url)
     preload()
     base_name = name or worker_name()
-    worked, incarnation = False, 0
+    worked, incarnation, done = False, 0, 0
     while True:
         # After an outage the worker comes back under a new name: RQ refuses to register a name
         # whose previous registration it may still hold.
@@ -205,12 +209,16 @@ def run_worker(
             ", burst" if burst else "",
         )
         try:
-            worked = worker.work(burst=burst, logging_level=log_level, with_scheduler=False) or worked
+            left = None if max_jobs is None else max_jobs - done
+            worked = worker.work(
+                burst=burst, max_jobs=left, logging_level=log_level, with_scheduler=False
+            ) or worked
         except REDIS_OUTAGE as exc:  # raised from RQ's own start-up or tear-down
             logger.warning("worker %s: Redis unavailable (%s)", worker.name, exc)
+        done += worker.jobs_done
         if worker.cold_stopped:
             raise ColdStop(f"worker {worker.name}: cold shutdown; its running trial was abandoned")
-        if burst or worker.stop_asked:
+        if burst or worker.stop_asked or (max_jobs is not None and done >= max_jobs):
             logger.info("worker %s: stopped", worker.name)
             return worked
         # Not asked to stop: RQ quit on an error, in practice Redis going away outside its

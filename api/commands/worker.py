@@ -20,6 +20,9 @@ def register(app: typer.Typer) -> None:
             "DEMCAL_QUEUE_NAME.<engine> for every engine installed here, e.g. .liggghts).",
         ),
         burst: bool = typer.Option(False, "--burst", help="Exit when the queues are empty."),
+        max_jobs: int = typer.Option(
+            None, "--max-jobs", min=1, help="Exit 0 after this many trials (to recycle workers)."
+        ),
         name: str = typer.Option(None, "--name", help="Worker name (default: host.pid.tag)."),
         heartbeat: int = typer.Option(
             10,
@@ -45,6 +48,7 @@ def register(app: typer.Typer) -> None:
                 settings.redis_url,
                 queues or engine_queues(settings.queue_name, engines),
                 burst=burst,
+                max_jobs=max_jobs,
                 name=name,
                 heartbeat_s=heartbeat,
                 log_level=settings.log_level,

@@ -166,10 +166,14 @@ class Cluster:
         wait_for(lambda: self._healthy(port or self.port), 60, f"{name} to answer /healthz")
         return process
 
-    def start_worker(self, name: str, data_dir: Path | None = None) -> subprocess.Popen:
-        """``demcal worker``; ``data_dir`` gives it a data directory of its own (another machine's)."""
+    def start_worker(
+        self, name: str, data_dir: Path | None = None, max_jobs: int | None = None
+    ) -> subprocess.Popen:
+        """``demcal worker``; ``data_dir`` gives it a data directory of its own (another machine's),
+        ``max_jobs`` makes it exit after that many trials."""
         env = {"DEMCAL_DATA_DIR": str(data_dir)} if data_dir else None
-        return self.start(name, "worker", "--name", name, "--heartbeat", "1", env=env)
+        extra = ("--max-jobs", str(max_jobs)) if max_jobs else ()
+        return self.start(name, "worker", "--name", name, "--heartbeat", "1", *extra, env=env)
 
     def _healthy(self, port: int) -> bool:
         try:
