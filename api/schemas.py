@@ -130,10 +130,11 @@ class ResponseRead(_Wire):
     """One response a scenario declares (``dem.scenarios.base.Response``)."""
 
     name: str
-    unit: str = Field(description="'1' for counts and other pure numbers.")
+    unit: str = Field(description="'1' for pure numbers; a count names what it counts ('items').")
     type: Literal["integer", "real"]
     failed_value: float = Field(description="What a failed simulation counts as in the objectives.")
     description: str = ""
+    label: str = Field("", description="A short name for plot axes and tables ('N_t', 'angle of repose').")
 
 
 class StudyRead(_Wire):

@@ -11,8 +11,9 @@ A scenario declares:
 * ``config_model`` — a pydantic model of its configuration, with a ``kind: Literal[...]`` field
   (the discriminator of ``StudyDefinition.scenario``) and a ``params`` section of default contact
   parameters (``ParamsConfig``);
-* ``responses`` — the named quantities a run measures (``Response``: unit, integer or real, and the
-  value a failed run gets, which the objectives use as the worst case);
+* ``responses`` — the named quantities a run measures (``Response``: unit, integer or real, the
+  value a failed run gets, which the objectives use as the worst case, and the short label the
+  dashboard's axes and tables print with the unit, "angle of repose (deg)");
 * ``cost_estimate(config, params)`` — the run's expected work in body-steps (bodies x time steps),
   which sizes job timeouts and orders trials longest first; and ``time_step(config, params)``,
   the step the engine will take (a cheap estimate);
@@ -76,10 +77,11 @@ class Response:
     """One measured quantity of a scenario."""
 
     name: str
-    unit: str  # "1" for counts and other pure numbers
+    unit: str  # "1" for pure numbers; a count says what it counts ("items")
     integer: bool
     failed_value: float  # what a failed run counts as in the objectives: the worst plausible value
     description: str = ""
+    label: str = ""  # short name for plot axes and tables ("N_t", "angle of repose"); default: name
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -88,6 +90,7 @@ class Response:
             "type": "integer" if self.integer else "real",
             "failed_value": self.failed_value,
             "description": self.description,
+            "label": self.label or self.name,
         }
 
 

@@ -79,6 +79,7 @@ def responses_of(config: CombinedConfig) -> tuple[Response, ...]:
                     response.integer,
                     scenario.failed_responses(data)[response.name],
                     f"{name}: {response.description}",
+                    f"{name} {response.label or response.name}",
                 )
             )
     return tuple(declared)

@@ -603,10 +603,11 @@ SCENARIO = Scenario(
     responses=(
         Response(
             "n_remaining",
-            unit="1",
+            unit="items",
             integer=True,
             failed_value=30,  # the paper's set; failed_function gives the config's own count
             description="N_t: items still in the tray at the end of the vibration.",
+            label="N_t",
         ),
     ),
     run_function=_run,

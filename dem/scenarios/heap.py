@@ -485,8 +485,12 @@ SCENARIO = Scenario(
             integer=False,
             failed_value=90.0,
             description="Angle of repose fitted from the heap's surface.",
+            label="angle of repose",
         ),
-        Response("height", unit="m", integer=False, failed_value=0.0, description="Height of the heap."),
+        Response(
+            "height", unit="m", integer=False, failed_value=0.0, description="Height of the heap.",
+            label="heap height",
+        ),
     ),
     run_function=run_heap,
     cost_function=estimated_cost,

@@ -112,7 +112,7 @@ def test_exports_hold_every_trial(client, keys, finished):
     rows = list(csv.DictReader(io.StringIO(csv_response.text)))
     assert csv_response.headers["content-type"].startswith("text/csv")
     assert len(rows) == 12
-    assert {"E", "nu", "e", "mu", "engine", "n_remaining", "f1", "f2", "pareto"} <= set(rows[0])
+    assert {"E", "nu", "e", "mu", "engine", "n_remaining [items]", "f1", "f2", "pareto"} <= set(rows[0])
     assert len(json_response.json()["trials"]) == 12
     assert json_response.json()["study"]["id"] == finished
 
@@ -143,10 +143,11 @@ def test_study_declares_its_responses_with_units_and_trials_carry_them(client, k
     assert body["responses"] == [
         {
             "name": "n_remaining",
-            "unit": "1",
+            "unit": "items",
             "type": "integer",
             "failed_value": body["responses"][0]["failed_value"],
             "description": "N_t: items still in the tray at the end of the vibration.",
+            "label": "N_t",
         }
     ]
     trials = client.get(f"/api/v1/studies/{finished}/trials", headers=keys.auth()).json()["items"]
@@ -181,3 +182,20 @@ def test_a_heap_study_declares_its_angle_with_its_unit(client, keys):
     assert bad.status_code == 422 and "no response 'N_t'" in bad.text
     engine = client.post("/api/v1/studies", json=study_definition(engine="liggghts"), headers=keys.auth())
     assert engine.status_code == 422 and "does not run scenario 'feeder'" in engine.text
+
+
+def test_csv_has_a_column_per_declared_response_headed_with_its_unit(client, keys, store):
+    from tests.dashboard.seed import seed_heap_study
+
+    seeded = seed_heap_study(store, with_feeder=True)
+    response = client.get(f"/api/v1/studies/{seeded.study_id}/export.csv", headers=keys.auth())
+    rows = list(csv.DictReader(io.StringIO(response.text)))
+
+    columns = ["heap.angle_deg [deg]", "heap.height [m]", "feeder.n_remaining [items]"]
+    header = list(rows[0])
+    assert header[header.index("status") + 1 : header.index("status") + 4] == columns
+    failed = [row for row in rows if row["trial_id"] in seeded.failed]
+    assert failed and all(row["failure"] == "unstable" and not any(row[c] for c in columns) for row in failed)
+    measured = [row for row in rows if row["trial_id"] not in seeded.failed]
+    assert all(row["failure"] == "" and all(row[c] for c in columns) for row in measured)
+    assert {float(row["heap.height [m]"]) for row in measured} == {0.04}

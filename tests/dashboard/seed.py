@@ -271,3 +271,89 @@ def add_finished_trials(
         objectives[spec.trial_id] = (abs(n_remaining - 4.0), wall)
     store.save_generation(study_id, generation, b"synthetic", [], None, objectives=objectives)
     return [spec.trial_id for spec in specs]
+
+
+HEAP_MEASURED = [29.5, 31.0, 32.5]  # deg
+HEAP_TOLERANCE = 1.5
+REPOSE_FEEDER = Path(__file__).resolve().parents[2] / "examples" / "study-repose-feeder.toml"
+
+
+def _angle(params: dict[str, float], target: float, rng: np.random.Generator) -> float:
+    """A made-up angle of repose: steeper with friction, about the target at the hidden set."""
+    return float(target + 30.0 * (params["mu"] - TRUTH["mu"]) + rng.normal(0, 0.8))
+
+
+def seed_heap_study(
+    store: SqlStore, *, with_feeder: bool = False, owner: str = "alice", seed: int = 9
+) -> SeededStudy:
+    """A finished angle-of-repose study (or, ``with_feeder``, the heap and feeder study of
+    ``examples/study-repose-feeder.toml``) with made-up responses; every seventh run ends
+    unstable. ``target`` is the angle's; f1 is the study's own rule (optimizer/objectives.py)."""
+    import tomllib
+
+    if with_feeder:
+        data = tomllib.loads(REPOSE_FEEDER.read_text())
+        data["validation"] = {"seeds": 0}
+    else:
+        data = {
+            "name": "heap-calibration",
+            "scenario": {"kind": "angle_of_repose"},
+            "experiment": {"response": "angle_deg", "measured": HEAP_MEASURED, "tolerance": HEAP_TOLERANCE},
+            "ga": {"population": 8, "offspring": 4, "generations": 3},
+            "validation": {"seeds": 0},
+        }
+    data["objective_time"] = "wall"
+    definition = parse_study(data)
+    experiments = definition.experiments
+    stored = definition.model_dump(mode="json")
+    rng = np.random.default_rng(seed)
+    study_id = store.create_study(stored, owner=owner)
+    store.set_status(study_id, StudyStatus.RUNNING)
+    target = experiments[0].target()
+    seeded = SeededStudy(study_id=study_id, api_key="", trial_ids=[], pareto_ids=[], target=target)
+    objectives: dict[str, tuple[float | None, float | None]] = {}
+    individual = 0
+    for generation in range(definition.ga.generations + 1):
+        size = definition.ga.population if generation == 0 else definition.ga.offspring
+        specs = []
+        for _ in range(size):
+            params = {"E": float(10 ** rng.uniform(5, 7)), "nu": 0.3, "e": float(rng.uniform(0.1, 0.9)),
+                      "mu": float(np.clip(TRUTH["mu"] + rng.normal(0, 0.3 / (1 + generation)), 0.1, 1.0))}
+            specs.append(TrialSpec(
+                trial_id=trial_id(study_id, individual, 0), study_id=study_id, individual=individual,
+                generation=generation, replicate=0, seed=2000 + individual, params=params,
+                scenario=stored["scenario"],
+            ))
+            individual += 1
+        store.add_trials(specs)
+        for spec in specs:
+            angle = _angle(spec.params, target, rng)
+            n_remaining, wall, cost = _response(spec.params, rng)
+            if with_feeder:
+                responses = {"heap.angle_deg": angle, "heap.height": 0.04, "feeder.n_remaining": n_remaining}
+            else:
+                responses = {"angle_deg": angle, "height": 0.04}
+            failed = spec.individual % 7 == 3
+            result = SimulationResult(
+                status=SimulationStatus.UNSTABLE if failed else SimulationStatus.OK,
+                message="unstable at t=0.1 s" if failed else "", responses=responses, sim_time=1.0,
+                wall_time_s=wall, cost=cost, params=spec.params, seed=spec.seed,
+            )
+            store.record_result(TrialOutcome(spec.trial_id, result, worker="seed"))
+            seeded.trial_ids.append(spec.trial_id)
+            if failed:
+                seeded.failed[spec.trial_id] = SimulationStatus.UNSTABLE.value
+                objectives[spec.trial_id] = (None, None)
+                continue
+            scale = (lambda x: 1.0) if len(experiments) == 1 else (lambda x: x.tolerance)
+            distances = [abs(responses[x.response] - x.target()) / scale(x) for x in experiments]
+            objectives[spec.trial_id] = (max(distances), wall)
+            seeded.f1[spec.trial_id] = max(distances)
+        measured = {tid: values for tid, values in objectives.items() if values[0] is not None}
+        seeded.pareto_ids = non_dominated(measured)
+        store.save_generation(
+            study_id, generation + 1, b"synthetic", seeded.pareto_ids, None,
+            objectives={s.trial_id: objectives[s.trial_id] for s in specs},
+        )
+    store.set_status(study_id, StudyStatus.DONE)
+    return seeded

@@ -119,16 +119,19 @@ export function experimentOf(definition) {
   return definition?.experiments?.[0] ?? definition?.experiment;
 }
 
-// The experiment's target with the study's own rule (optimizer/study.py Experiment.target).
+// The first experiment's target with the study's own rule (optimizer/study.py Experiment.target).
 export function targetOf(definition) {
-  const exp = experimentOf(definition);
+  return experimentTarget(experimentOf(definition));
+}
+
+function experimentTarget(exp, integer = true) {
   if (!exp?.measured?.length) return NaN;
   const v = [...exp.measured].sort((a, b) => a - b);
   const mid = Math.floor(v.length / 2);
   let value = (exp.aggregate || "median") === "mean"
     ? v.reduce((a, b) => a + b, 0) / v.length
     : (v.length % 2 ? v[mid] : (v[mid - 1] + v[mid]) / 2);
-  const rule = exp.round || "half_up";
+  const rule = exp.round || (integer ? "half_up" : "none");
   if (rule === "half_up") value = Math.floor(value + 0.5);
   else if (rule === "half_even") {
     const floor = Math.floor(value);
@@ -136,6 +139,41 @@ export function targetOf(definition) {
     value = diff > 0.5 || (diff === 0.5 && floor % 2 === 1) ? floor + 1 : floor;
   }
   return value;
+}
+
+// ---- responses ------------------------------------------------------------------------------
+// What the study's experiments measured, in their order: each the declaration the API sends with
+// the study (`responses`: name, unit, label, from the scenario registry), its experiment and
+// target. The pages name and label every response from here, never a scenario of their own.
+export function experimentResponses(study) {
+  const declared = study?.responses || [];
+  const def = study?.definition || {};
+  const experiments = def.experiments || (def.experiment ? [def.experiment] : []);
+  return experiments.map((experiment) => {
+    const name = experiment.response || declared[0]?.name || "n_remaining";
+    const response = declared.find((d) => d.name === name) || { name, unit: "1", type: "real", label: name };
+    return { ...response, experiment, target: experimentTarget(experiment, response.type === "integer") };
+  });
+}
+
+const escapeHtml = (text) => text.replace(/&/g, "&amp;").replace(/</g, "&lt;").replace(/>/g, "&gt;");
+
+// Plain text ("N_t", "angle of repose") for tables and captions; plotly's HTML ("N<sub>t</sub>").
+export const responseText = (r) => r.label || r.name;
+export const responseHtml = (r) => escapeHtml(responseText(r)).replace(/_(\w+)/g, "<sub>$1</sub>");
+export const unitOf = (r) => (r.unit === "1" ? "–" : r.unit);
+
+// "31.2 deg", "3 items", "0.25" (a pure number has no unit).
+export function withUnit(value, r, digits = 3) {
+  if (value === null || value === undefined) return "–";
+  return r.unit === "1" ? fmt(value, digits) : `${fmt(value, digits)} ${r.unit}`;
+}
+
+// A finished run's measured value of a response; null for a run that measured nothing.
+export function measuredValue(trial, r) {
+  if (trial.status !== "ok") return null;
+  const value = trial.responses?.[r.name];
+  return value === undefined ? null : value;
 }
 
 // plotly.min.js loads with `async`, so code that draws waits for it here.

@@ -1,7 +1,7 @@
 // Plot builders shared by the study page: pure functions from trials to plotly traces/layouts.
 // They never fetch and never touch the DOM, so the page decides when to draw.
 
-import { PARAMETERS, fmt } from "./api.js";
+import { PARAMETERS, fmt, measuredValue, responseHtml, unitOf, withUnit } from "./api.js";
 
 // Above this many points SVG gets slow; WebGL (scattergl) draws 10,000 points in milliseconds.
 const WEBGL_ABOVE = 1500;
@@ -55,15 +55,34 @@ function byGeneration(trials, value) {
   return { x: generations, y: generations.map((g) => median(groups.get(g))) };
 }
 
+// customdata[5] holds the trial's responses as text ("N<sub>t</sub> = 3 items"), one line each.
 const HOVER =
   "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br>" +
   "E = %{customdata[1]:.3s}Pa<br>ν = %{customdata[2]:.3f}<br>e = %{customdata[3]:.3f}<br>" +
-  "μ = %{customdata[4]:.3f}<br>N<sub>t</sub> = %{customdata[5]}<extra></extra>";
+  "μ = %{customdata[4]:.3f}<br>%{customdata[5]}<extra></extra>";
 
-function customdata(trials) {
+function customdata(trials, responses) {
   return trials.map((t) => [
-    t.id, t.params.E, t.params.nu, t.params.e, t.params.mu, t.n_remaining ?? "–", t.generation,
+    t.id, t.params.E, t.params.nu, t.params.e, t.params.mu,
+    responses.map((r) => `${responseHtml(r)} = ${withUnit(measuredValue(t, r), r, 4)}`).join("<br>"),
+    t.generation,
   ]);
+}
+
+// What the study's f1 is and in which unit: one experiment's distance is in its response's unit;
+// several are each divided by their tolerance and the worst is taken (optimizer/objectives.py).
+export function f1Unit(responses) {
+  return responses.length === 1 ? unitOf(responses[0]) : "–";
+}
+
+function f1Title(responses) {
+  if (responses.length !== 1) return "f1 = max |simulated − target| / tolerance (–)";
+  return `f1 = |${responseHtml(responses[0])} − target| (${f1Unit(responses)})`;
+}
+
+// What a failed run lacks, for captions and hover texts: "no N<sub>t</sub>".
+export function noneHtml(responses) {
+  return responses.length === 1 ? `no ${responseHtml(responses[0])}` : "no responses";
 }
 
 function yTop(trials, value = (t) => t.f1) {
@@ -123,14 +142,15 @@ export function failureCounts(trials) {
   return { total, byStatus, text };
 }
 
+// customdata[5] holds what the run lacks ("no N<sub>t</sub>").
 const FAILED_HOVER =
-  "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br><b>%{customdata[7]}</b>: no N<sub>t</sub>, " +
+  "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br><b>%{customdata[7]}</b>: %{customdata[5]}, " +
   "not ranked<br>E = %{customdata[1]:.3s}Pa<br>ν = %{customdata[2]:.3f}<br>e = %{customdata[3]:.3f}<br>" +
   "μ = %{customdata[4]:.3f}<extra></extra>";
 
-function failedCustomdata(trials, failures) {
+function failedCustomdata(trials, failures, responses) {
   return trials.map((t) => [
-    t.id, t.params.E, t.params.nu, t.params.e, t.params.mu, "–", t.generation,
+    t.id, t.params.E, t.params.nu, t.params.e, t.params.mu, noneHtml(responses), t.generation,
     t.status === "ok" ? `${failures.get(t.individual)} (another replicate)` : t.status,
   ]);
 }
@@ -139,7 +159,7 @@ function failedCustomdata(trials, failures) {
 // outlined diamonds on top, so the front stands out without relying on colour alone. Then one
 // trace per failed status, in a strip of its own above the plot at the runs' real x: they sit
 // apart from the measured points, never at a made-up f1.
-export function paretoFigure(trials, xKey, maxGeneration) {
+export function paretoFigure(trials, xKey, maxGeneration, responses) {
   const x = X_AXES[xKey];
   const failures = individualFailures(trials);
   const failedOf = (t) => t.state === "done" && failures.get(t.individual);
@@ -150,7 +170,7 @@ export function paretoFigure(trials, xKey, maxGeneration) {
   const all = {
     type, mode: "markers", name: "trials",
     x: shown.map(x.value), y: shown.map((t) => t.f1),
-    customdata: customdata(shown), hovertemplate: HOVER,
+    customdata: customdata(shown, responses), hovertemplate: HOVER,
     marker: {
       size: 7, opacity: 0.8, color: shown.map((t) => t.generation), colorscale: COLORSCALE,
       // A thin dark rim keeps the light end of viridis visible on white.
@@ -161,7 +181,7 @@ export function paretoFigure(trials, xKey, maxGeneration) {
   const pareto = {
     type, mode: "lines+markers", name: "Pareto members",
     x: front.map(x.value), y: front.map((t) => t.f1),
-    customdata: customdata(front), hovertemplate: HOVER,
+    customdata: customdata(front, responses), hovertemplate: HOVER,
     line: { color: INK, width: 1, dash: "dot", shape: "hv" },
     marker: {
       symbol: "diamond", size: 13, color: front.map((t) => t.generation), colorscale: COLORSCALE,
@@ -177,13 +197,13 @@ export function paretoFigure(trials, xKey, maxGeneration) {
     return {
       type, mode: "markers", name: `${status} (not ranked)`,
       x: members.map(x.value), y: members.map(() => status), xaxis: "x", yaxis: "y2",
-      customdata: failedCustomdata(members, failures), hovertemplate: FAILED_HOVER,
+      customdata: failedCustomdata(members, failures, responses), hovertemplate: FAILED_HOVER,
       marker: { symbol: style.symbol, size: 9, color: style.color, line: { width: 1, color: style.color } },
     };
   });
   const layout = baseLayout({
     xaxis: axis(x.title),
-    yaxis: axis("f1 = |N<sub>t</sub> − target| (items)", {
+    yaxis: axis(f1Title(responses), {
       range: fromZero(shown, (t) => t.f1), domain: rows.length ? [0, 0.78] : [0, 1],
     }),
     yaxis2: axis("", {
@@ -192,7 +212,7 @@ export function paretoFigure(trials, xKey, maxGeneration) {
     }),
     annotations: rows.length ? [{
       xref: "paper", yref: "paper", x: 0, y: 1.0, xanchor: "left", yanchor: "bottom", showarrow: false,
-      text: `<b>${counts.text}</b> — no N<sub>t</sub>, drawn apart, not ranked`, font: { size: 12, color: INK },
+      text: `<b>${counts.text}</b> — ${noneHtml(responses)}, drawn apart, not ranked`, font: { size: 12, color: INK },
     }] : [],
     legend: { orientation: "h", x: 0, y: -0.22, yanchor: "top" },
     hovermode: "closest",
@@ -205,17 +225,21 @@ export function paretoFigure(trials, xKey, maxGeneration) {
   };
 }
 
-// The paper's Fig. 5: N_t (a) and T (b) of every measured trial against generation, medians,
-// target; above (a), the failed runs of each generation stacked by status: a failed run has no
-// N_t (the API sends none) and its T is where it stopped, so neither panel draws it.
-export function generationFigure(trials, target, maxGeneration) {
+// The paper's Fig. 5: each experiment's response ((a), and (b)... for several experiments, one
+// above the other on the left) and T (the last letter, on the right) of every measured trial
+// against generation, medians, targets; above the first panel, the failed runs of each
+// generation stacked by status: a failed run measured nothing and its T is where it stopped,
+// so no panel draws it. Axes: x/y the first response, x2/y2 T, x3/y3 the failed runs, x4/y4
+// onwards the other responses.
+export function generationFigure(trials, responses, maxGeneration) {
   const done = trials.filter((t) => t.state === "done" && !isFailed(t));
   const type = done.length > WEBGL_ABOVE ? "scattergl" : "scatter";
   const gens = done.map((t) => t.generation + jitter(t));
+  const hover = customdata(done, responses);
   const points = (y, axisSuffix) => ({
     type, mode: "markers", name: "trials", showlegend: axisSuffix === "",
     x: gens, y, xaxis: "x" + axisSuffix, yaxis: "y" + axisSuffix,
-    customdata: customdata(done), hovertemplate: HOVER,
+    customdata: hover, hovertemplate: HOVER,
     marker: { size: 5, color: "#56b4e9", opacity: 0.7, line: { width: 0.5, color: "#0072b2" } },
   });
   const medianTrace = (value, axisSuffix) => {
@@ -227,12 +251,14 @@ export function generationFigure(trials, target, maxGeneration) {
       hovertemplate: "generation %{x}<br>median %{y:.3g}<extra></extra>",
     };
   };
-  const data = [
-    points(done.map((t) => t.n_remaining), ""),
-    medianTrace((t) => t.n_remaining, ""),
-    points(done.map((t) => t.wall_time_s), "2"),
-    medianTrace((t) => t.wall_time_s, "2"),
-  ];
+  const suffixOf = (i) => (i === 0 ? "" : String(i + 3));
+  const data = [];
+  responses.forEach((r, i) => {
+    const value = (t) => measuredValue(t, r);
+    data.push(points(done.map(value), suffixOf(i)), medianTrace(value, suffixOf(i)));
+    if (i === 0) data.push(points(done.map((t) => t.wall_time_s), "2"), medianTrace((t) => t.wall_time_s, "2"));
+  });
+  const none = noneHtml(responses);
   const counts = failureCounts(trials);
   for (const [status] of counts.byStatus) {
     const perGeneration = new Map();
@@ -243,37 +269,56 @@ export function generationFigure(trials, target, maxGeneration) {
     data.push({
       type: "bar", name: `${status} runs`, x: generations, y: generations.map((g) => perGeneration.get(g)),
       xaxis: "x3", yaxis: "y3", marker: { color: failureStyle(status).color }, width: 0.6,
-      hovertemplate: `generation %{x}<br>%{y} ${status} run(s): no N<sub>t</sub><extra></extra>`,
+      hovertemplate: `generation %{x}<br>%{y} ${status} run(s): ${none}<extra></extra>`,
     });
   }
-  if (Number.isFinite(target)) {
+  responses.forEach((r, i) => {
+    if (!Number.isFinite(r.target)) return;
     data.push({
-      type: "scatter", mode: "lines", name: `experimental target N<sub>t</sub> = ${fmt(target)}`,
-      x: [-0.5, Math.max(1, maxGeneration) + 0.5], y: [target, target],
+      type: "scatter", mode: "lines", name: `experimental target ${responseHtml(r)} = ${fmt(r.target)}`,
+      x: [-0.5, Math.max(1, maxGeneration) + 0.5], y: [r.target, r.target],
+      xaxis: "x" + suffixOf(i), yaxis: "y" + suffixOf(i),
       line: { color: TARGET, width: 2, dash: "dash" }, hoverinfo: "skip",
     });
-  }
+  });
   const range = [-0.6, maxGeneration + 0.6];
   const genAxis = (title, domain) => axis(title, { dtick: maxGeneration > 15 ? undefined : 1, range, domain });
+  // The response panels share the left column below the failed-runs strip, 0.06 apart.
+  const gap = 0.06;
+  const height = (0.74 - gap * (responses.length - 1)) / responses.length;
+  const letter = (i) => String.fromCharCode(97 + i);
   const layout = baseLayout({
-    xaxis: genAxis("generation", [0, 0.46]),
-    yaxis: axis("(a) measured N<sub>t</sub> (items)", {
-      domain: [0, 0.74],
-      range: fromZero(done, (t) => Math.max(t.n_remaining ?? 0, Number.isFinite(target) ? target : 0)),
-    }),
     xaxis2: genAxis("generation", [0.54, 1]),
-    yaxis2: axis("(b) computation time T (s)", { domain: [0, 1], range: fromZero(done, (t) => t.wall_time_s) }),
+    yaxis2: axis(`(${letter(responses.length)}) computation time T (s)`, {
+      domain: [0, 1], range: fromZero(done, (t) => t.wall_time_s),
+    }),
     xaxis3: genAxis("", [0, 0.46]),
     yaxis3: axis("failed runs", { domain: [0.8, 0.93], rangemode: "tozero", nticks: 3, title: { text: "failed<br>runs", font: { size: 11 } } }),
     barmode: "stack",
     annotations: [{
       xref: "x3 domain", yref: "y3 domain", x: 0, y: 1, xanchor: "left", yanchor: "bottom", showarrow: false,
-      text: `${counts.text}${counts.total ? " — no N<sub>t</sub>, not in (a) or (b)" : ": every run measured N<sub>t</sub>"}`,
+      text: counts.total ? `${counts.text} — ${none}, ${responses.length === 1 ? "not in (a) or (b)" : "in no panel"}`
+        : `${counts.text}: every run measured ${responses.length === 1 ? responseHtml(responses[0]) : "every response"}`,
       font: { size: 12, color: INK },
     }],
     hovermode: "closest",
     margin: { l: 64, r: 24, t: 64, b: 56 },
     uirevision: "keep", // a zoom survives the next poll's redraw
+  });
+  responses.forEach((r, i) => {
+    const top = 0.74 - i * (height + gap);
+    const value = (t) => Math.max(measuredValue(t, r) ?? 0, Number.isFinite(r.target) ? r.target : 0);
+    const last = i === responses.length - 1;
+    layout["xaxis" + suffixOf(i)] = genAxis(last ? "generation" : "", [0, 0.46]);
+    // Stacked panels are shorter: their titles drop "measured" to fit.
+    const title = `(${letter(i)}) ${responses.length === 1 ? "measured " : ""}${responseHtml(r)} (${unitOf(r)})`;
+    layout["yaxis" + suffixOf(i)] = axis(title, {
+      domain: [Math.max(0, top - height), top], range: fromZero(done, value),
+    });
+    if (i > 0) {
+      layout["xaxis" + suffixOf(i)].anchor = "y" + suffixOf(i);
+      layout["yaxis" + suffixOf(i)].anchor = "x" + suffixOf(i);
+    }
   });
   layout.xaxis3.showticklabels = false;
   layout.xaxis3.anchor = "y3";
@@ -285,8 +330,10 @@ export function generationFigure(trials, target, maxGeneration) {
 
 // Progress against simulations (GET /studies/{id}/progress): the hypervolume of what was
 // measured (left axis, a fraction of the study's fixed reference box) and the best f1 and best
-// validated f1 (right axis, items), one point per completed batch.
-export function progressFigure(progress) {
+// validated f1 (right axis, in f1's unit), one point per completed batch.
+export function progressFigure(progress, responses) {
+  const unit = f1Unit(responses);
+  const inUnit = unit === "–" ? "" : ` ${unit}`;
   const points = progress.points || [];
   const sims = points.map((p) => p.simulations);
   const data = [
@@ -298,13 +345,13 @@ export function progressFigure(progress) {
     {
       type: "scatter", mode: "lines+markers", name: "best f1", x: sims, y: points.map((p) => p.best_f1),
       yaxis: "y2", line: { color: MEDIAN, width: 2, shape: "hv" }, marker: { size: 6, color: MEDIAN },
-      hovertemplate: "%{x} simulations<br>best f1 %{y:.3g} items<extra></extra>",
+      hovertemplate: `%{x} simulations<br>best f1 %{y:.3g}${inUnit}<extra></extra>`,
     },
     {
       type: "scatter", mode: "lines+markers", name: "best validated f1", x: sims,
       y: points.map((p) => p.best_validated_f1), yaxis: "y2",
       line: { color: "#009e73", width: 2, dash: "dot", shape: "hv" }, marker: { size: 8, symbol: "star", color: "#009e73" },
-      hovertemplate: "%{x} simulations<br>best validated f1 %{y:.3g} items<extra></extra>",
+      hovertemplate: `%{x} simulations<br>best validated f1 %{y:.3g}${inUnit}<extra></extra>`,
     },
   ];
   const ref = progress.reference;
@@ -312,7 +359,7 @@ export function progressFigure(progress) {
   const layout = baseLayout({
     xaxis: axis("simulations", { rangemode: "tozero" }),
     yaxis: axis("hypervolume (fraction of the reference box)", { range: [0, 1.02] }),
-    yaxis2: axis("f1 (items)", {
+    yaxis2: axis(`f1 (${unit})`, {
       overlaying: "y", side: "right", showgrid: false, tickmode: "auto", nticks: 6,
       range: [-0.02 * f1Top, 1.05 * f1Top],
     }),
@@ -321,7 +368,7 @@ export function progressFigure(progress) {
     uirevision: "keep",
   });
   const caption = ref
-    ? `Reference point (fixed once the initial population is complete): f1 = ${fmt(ref.f1)} items, ` +
+    ? `Reference point (fixed once the initial population is complete): f1 = ${fmt(ref.f1)}${inUnit}, ` +
       `f2 = ${fmt(ref.f2)} (1.1 × the initial population's largest).`
     : "No point yet: the hypervolume's reference is fixed when the initial population is complete.";
   return { data, layout, caption };
@@ -330,7 +377,7 @@ export function progressFigure(progress) {
 // One panel per searched parameter: values against generation with the median; fixed ones
 // skipped. A large study gets a box per generation instead of its points: four panels of
 // 10,000 coloured points cost seconds to draw, and the boxes show the narrowing just as well.
-export function parameterFigure(trials, bounds, maxGeneration) {
+export function parameterFigure(trials, bounds, maxGeneration, responses) {
   const free = PARAMETERS.filter((p) => !bounds[p.key] || bounds[p.key].fixed == null);
   const all = trials.filter((t) => t.params && t.state !== "cancelled");
   const boxes = all.length > WEBGL_ABOVE;
@@ -361,16 +408,16 @@ export function parameterFigure(trials, bounds, maxGeneration) {
       data.push({
         type: "scatter", mode: "markers", name: "trials", showlegend: i === 0,
         x: gens, y: done.map((t) => t.params[p.key]), xaxis: "x" + suffix, yaxis: "y" + suffix,
-        customdata: customdata(done), hovertemplate: HOVER,
+        customdata: customdata(done, responses), hovertemplate: HOVER,
         marker: { size: 6, color: done.map((t) => t.f1), colorscale: "Cividis", reversescale: true,
           cmin: 0, showscale: i === 0, line: { width: 0.6, color: "#3b3b3b" },
-          colorbar: { title: { text: "f1 (items)" }, thickness: 12, len: 0.8 } },
+          colorbar: { title: { text: `f1 (${f1Unit(responses)})` }, thickness: 12, len: 0.8 } },
       });
       data.push({
-        type: "scatter", mode: "markers", name: "failed (no N<sub>t</sub>)", showlegend: i === 0,
+        type: "scatter", mode: "markers", name: `failed (${noneHtml(responses)})`, showlegend: i === 0,
         x: failed.map((t) => t.generation + jitter(t)), y: failed.map((t) => t.params[p.key]),
         xaxis: "x" + suffix, yaxis: "y" + suffix,
-        customdata: failedCustomdata(failed, failures), hovertemplate: FAILED_HOVER,
+        customdata: failedCustomdata(failed, failures, responses), hovertemplate: FAILED_HOVER,
         marker: { size: 7, symbol: "x-thin", color: "#8c959f", line: { width: 1.5, color: "#8c959f" } },
       });
     }

@@ -6,11 +6,12 @@
 // and upserted by id, so a running study costs one small request every few seconds.
 
 import {
-  ApiError, PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, poll,
-  plotlyReady, showBanner, statusBadge, targetOf, experimentOf,
+  ApiError, PARAMETERS, api, apiKey, clearBanner, el, experimentResponses, fmt, fmtTime, generationText,
+  itemsOf, measuredValue, poll, plotlyReady, responseHtml, responseText, showBanner, statusBadge, unitOf,
+  withUnit,
 } from "./api.js";
 import {
-  CONFIG, generationFigure, paretoFigure, parameterFigure, progressFigure,
+  CONFIG, f1Unit, generationFigure, paretoFigure, parameterFigure, progressFigure,
 } from "./plots.js";
 
 const studyId = document.getElementById("study").dataset.studyId;
@@ -21,6 +22,7 @@ const TERMINAL = new Set(["done", "cancelled", "failed"]);
 
 const trials = new Map();
 let study = null;
+let responses = []; // the experiments' responses with units (api.js experimentResponses)
 let cursor = null; // server_time of the last page: the next poll asks only for newer changes
 let recommendationGeneration = -1;
 
@@ -59,8 +61,10 @@ function renderHeader() {
     ["Progress", `${p.trials_done} / ${p.trials_total} trials`],
     ["Failed runs", p.failures ? p.failures.text.replace(/^failed: /, "") : "–"],
     ["Generation", generationText(p.generation, p.generations_total)],
-    ["Target N_t", `${fmt(targetOf(def))} items (tolerance ±${fmt(experimentOf(def)?.tolerance ?? NaN)})`],
-    ["Measured N_t", (experimentOf(def)?.measured || []).join(", ")],
+    ...responses.flatMap((r) => [
+      [`Target ${responseText(r)}`, `${withUnit(r.target, r)} (tolerance ±${fmt(r.experiment.tolerance ?? NaN)})`],
+      [`Measured ${responseText(r)}`, (r.experiment.measured || []).join(", ")],
+    ]),
     ["Objective f2", def.objective_time === "wall" ? "wall time T (s)" : "cost (machine-independent)"],
     ["Created", fmtTime(study.created_at)],
     ["Updated", fmtTime(study.updated_at)],
@@ -94,7 +98,7 @@ async function renderPlots() {
   const list = [...trials.values()];
   const xKey = document.getElementById("pareto-x").value;
   const gmax = maxGeneration();
-  const pareto = paretoFigure(list, xKey, gmax);
+  const pareto = paretoFigure(list, xKey, gmax, responses);
   Plotly.react("pareto-plot", pareto.data, pareto.layout, CONFIG);
   const caption = document.getElementById("pareto-caption");
   const pending = pareto.hidden;
@@ -102,8 +106,8 @@ async function renderPlots() {
     `${pareto.measured} measured trials, coloured by generation; ` +
     `${pareto.data[1].x.length} Pareto members are outlined diamonds. ` +
     (pareto.counts.total
-      ? `Above, apart: ${pareto.counts.text}; their trials (${pareto.failed}) have no N_t and are not ranked. `
-      : "Every finished run measured N_t. ") +
+      ? `Above, apart: ${pareto.counts.text}; their trials (${pareto.failed}) have ${noneText()} and are not ranked. `
+      : `Every finished run measured ${measuredText()}. `) +
     "Click a point to open its trial." +
     (pending ? ` ${pending} trials not shown (not finished yet).` : "");
   if (!performance.getEntriesByName("demcal:pareto-drawn").length) performance.mark("demcal:pareto-drawn");
@@ -111,9 +115,12 @@ async function renderPlots() {
   // Fig. 5 and the parameters are the search's generations; extra replicates and the validation
   // (later batches) are shown in the recommendation and validation tables.
   const searched = list.filter((t) => t.generation <= gmax);
-  const gen = generationFigure(searched, targetOf(study.definition), gmax);
+  // One panel per experiment's response, each as tall as the feeder's single one.
+  document.getElementById("generation-plot").style.height = responses.length > 1
+    ? `${520 + 300 * (responses.length - 1)}px` : "";
+  const gen = generationFigure(searched, responses, gmax);
   Plotly.react("generation-plot", gen.data, gen.layout, CONFIG);
-  const par = parameterFigure(searched, study.definition?.parameters || {}, gmax);
+  const par = parameterFigure(searched, study.definition?.parameters || {}, gmax, responses);
   Plotly.react("parameter-plot", par.data, par.layout, CONFIG);
   // A point can be clicked as soon as it is drawn, not only once the slower tables have loaded.
   bindClicks();
@@ -125,10 +132,27 @@ function paramCells(params) {
   return PARAMETERS.map((p) => el("td", { class: "num", text: fmt(params?.[p.key], 4) }));
 }
 
-// The N_t of every measured run of an individual (its replicates), from the trials loaded.
+const noneText = () => (responses.length === 1 ? `no ${responseText(responses[0])}` : "no responses");
+const measuredText = () => (responses.length === 1 ? responseText(responses[0]) : "every response");
+
+// Values per response as one cell: "2, 3" for one experiment, "angle: 31, 32; N_t: 2, 3" for several.
+function valuesText(valuesOf) {
+  const shown = (r) => (valuesOf(r) || []).map((v) => fmt(v, 4)).join(", ") || "–";
+  return responses.length === 1 ? shown(responses[0])
+    : responses.map((r) => `${responseText(r)}: ${shown(r)}`).join("; ");
+}
+
+// The measured responses of every run of an individual (its replicates), from the trials loaded.
 function runsOf(individual) {
   const runs = [...trials.values()].filter((t) => t.individual === individual && t.state === "done");
-  return { runs: runs.length, nt: runs.filter((t) => t.n_remaining !== null).map((t) => t.n_remaining) };
+  const values = (r) => runs.map((t) => measuredValue(t, r)).filter((v) => v !== null);
+  return { runs: runs.length, text: valuesText(values), measured: responses.some((r) => values(r).length) };
+}
+
+// A table header naming the responses ("N<sub>t</sub> per run"), written as plotly's labels are.
+function headerHtml(th, suffix, prefix = "") {
+  const name = responses.length === 1 ? responseHtml(responses[0]) : "responses";
+  th.innerHTML = `${prefix}${name}${suffix}`;
 }
 
 const interval = (pair, digits = 2) => (pair ? `[${fmt(pair[0], digits)}–${fmt(pair[1], digits)}]` : "");
@@ -145,10 +169,15 @@ async function renderRecommendation() {
   } else {
     const params = rec.params || {};
     const rows = PARAMETERS.map((p) => [p.title, fmt(params[p.key], 4)]);
-    if (Array.isArray(rec.n_remaining)) rows.push(["N_t per replicate (items)", rec.n_remaining.join(", ") || "–"]);
-    else if (rec.n_remaining !== undefined && rec.n_remaining !== null) rows.push(["N_t (items)", fmt(rec.n_remaining)]);
+    for (const r of responses) {
+      // optimizer.pareto.summary: each experiment's response per replicate (older: N_t only).
+      const values = rec.responses?.[r.name] ?? (r.name === "n_remaining" ? rec.n_remaining : undefined);
+      const label = `${responseText(r)}`;
+      if (Array.isArray(values)) rows.push([`${label} per replicate (${unitOf(r)})`, values.map((v) => fmt(v, 4)).join(", ") || "–"]);
+      else if (values !== undefined && values !== null) rows.push([`${label} (${unitOf(r)})`, fmt(values, 4)]);
+    }
     if (rec.f1 !== undefined && rec.f1 !== null) {
-      rows.push(["f1 (items)", `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
+      rows.push([`f1 (${f1Unit(responses)})`, `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
     }
     if (rec.replicates) rows.push(["replicates in the search", String(rec.replicates)]);
     for (const [key, label] of [["wall_time_s", "T (s)"], ["cost", "cost"]]) {
@@ -159,21 +188,24 @@ async function renderRecommendation() {
     const verdict = rec.validation_status;
     box.replaceChildren(
       el("p", { text: verdict ? "The fastest validated parameter set (fresh seeds, table below):"
-        : "The fastest Pareto member whose N_t matches the experiment within tolerance:" }),
+        : responses.length === 1
+          ? `The fastest Pareto member whose ${responseText(responses[0])} matches the experiment within tolerance:`
+          : "The fastest Pareto member whose responses match every experiment within tolerance:" }),
       verdict ? el("p", { id: "validation-status" }, "Validation: ",
         el("span", { class: `status ${VALIDATION_CLASS[verdict] || ""}`, text: verdict })) : null,
       dl,
       trialId ? el("p", {}, el("a", { href: `/trials/${encodeURIComponent(trialId)}`, text: `open trial ${trialId}` })) : null,
     );
   }
-  renderValidation(rec?.validation || [], study?.definition?.experiment?.measured || []);
+  renderValidation(rec?.validation || [], responses[0]?.experiment?.measured || []);
+  headerHtml(document.getElementById("equivalent-response"), " per run");
   const tbody = document.querySelector("#equivalent tbody");
   const rows = (body.equivalent || []).map((t) => {
-    const { runs, nt } = runsOf(t.individual);
+    const { runs, text, measured } = runsOf(t.individual);
     return el("tr", {},
       el("td", {}, el("a", { href: `/trials/${encodeURIComponent(t.id)}`, text: `g${t.generation} · i${t.individual}` })),
       ...paramCells(t.params),
-      el("td", { class: "num", text: nt.length ? nt.join(", ") : "–" }),
+      el("td", { class: "num", text: measured ? text : "–" }),
       el("td", { class: "num", text: String(runs) }),
       el("td", { class: "num", text: fmt(t.wall_time_s) }));
   });
@@ -181,8 +213,9 @@ async function renderRecommendation() {
     : [el("tr", {}, el("td", { colspan: 8, class: "muted", text: "None yet." }))]));
 }
 
-// The validation that ends a study (optimizer/validation.py): each candidate's fresh-seed N_t
-// against the experiment, with W1, the median and f1 with their bootstrap intervals.
+// The validation that ends a study (optimizer/validation.py): each candidate's fresh-seed values
+// of the first experiment's response (its "n_remaining" field, whatever the response) against
+// the experiment, with W1, the median and f1 with their bootstrap intervals.
 function renderValidation(rows, measured) {
   const section = document.getElementById("validation");
   section.hidden = rows.length === 0;
@@ -191,9 +224,11 @@ function renderValidation(rows, measured) {
   const mid = Math.floor(sorted.length / 2);
   const median = sorted.length % 2 ? sorted[mid] : (sorted[mid - 1] + sorted[mid]) / 2;
   document.getElementById("validation-caption").textContent =
-    `Experiment: N_t ${measured.join(", ")} (median ${fmt(median)}). Each candidate re-simulated on ` +
+    `Experiment: ${responseText(responses[0])} ${measured.join(", ")} (median ${fmt(median)}). ` +
+    "Each candidate re-simulated on " +
     "seeds never used in the search; validated when every fresh run measured and the fresh f1 " +
     "interval reaches the tolerance.";
+  headerHtml(document.getElementById("validation-response"), "", "fresh ");
   document.querySelector("#validation-table tbody").replaceChildren(...rows.map((row) => el("tr",
     { "data-individual": row.individual },
     el("td", { text: `i${row.individual}` }),
@@ -212,7 +247,7 @@ async function renderProgress() {
     api(`${base}/progress`), api(`${base}/identifiability`),
   ]);
   await plotlyReady();
-  const figure = progressFigure(progress);
+  const figure = progressFigure(progress, responses);
   Plotly.react("progress-plot", figure.data, figure.layout, CONFIG);
   document.getElementById("progress-caption").textContent = figure.caption;
   renderIdentifiability(identified);
@@ -247,6 +282,13 @@ async function refresh() {
     // The first load reads the study and the trials at once. Later polls read the study first:
     // a study seen finished must not stop polling before its last trial changes were read.
     [study, changed] = await Promise.all([api(base), loadTrialChanges()]);
+    responses = experimentResponses(study);
+    const first = responses[0] ? responseText(responses[0]) : "the response";
+    document.getElementById("identifiability-help").textContent =
+      `Total index: the share of ${first}'s variance over the search box due to the parameter, ` +
+      `interactions included (near 0: no ${first} experiment can tell its value). Matching spread: ` +
+      "the matching sets' range as a share of the searched range (near 1: any value in the bounds " +
+      "reproduces the experiment).";
     // Pareto membership is computed on the study's own f2, so show that axis first.
     document.getElementById("pareto-x").value =
       study.definition?.objective_time === "wall" ? "wall_time_s" : "cost";

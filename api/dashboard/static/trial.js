@@ -1,12 +1,13 @@
-// The trial page: parameters, seed, status and timings; the discharge curve (items remaining
-// against simulated time, from the result's discharge_times); and, when the trial kept
-// snapshots, a top-view replay on a canvas with the items retained at the end marked.
+// The trial page: parameters, seed, status and timings, every response the scenario declares
+// with its unit; the discharge curve (items remaining against simulated time, from the result's
+// discharge_times, when the scenario records one); and, when the trial kept snapshots, a
+// top-view replay on a canvas with the items retained at the end marked.
 
 import {
-  ApiError, PARAMETERS, api, apiKey, el, fmt, fmtSeconds, fmtTime, plotlyReady, poll, showBanner,
-  statusBadge, targetOf,
+  ApiError, PARAMETERS, api, apiKey, el, experimentResponses, fmt, fmtSeconds, fmtTime, measuredValue,
+  plotlyReady, poll, responseHtml, responseText, showBanner, statusBadge, withUnit,
 } from "./api.js";
-import { CONFIG, baseLayout } from "./plots.js";
+import { CONFIG, baseLayout, f1Unit } from "./plots.js";
 
 const section = document.getElementById("trial");
 const trialId = section.dataset.trialId;
@@ -17,16 +18,27 @@ const RETAINED = "#e69f00"; // Okabe-Ito orange
 const DISCHARGED = "#56b4e9"; // Okabe-Ito sky blue
 const INK = "#1b1f24";
 
-function facts(trial) {
+// A response's value as the facts show it: "31.2 deg"; a count of the run's items "3 of 30 items".
+function responseValue(trial, response) {
+  const value = measuredValue(trial, response);
+  if (value === null) {
+    return trial.status && trial.status !== "ok" ? `none: the run ended ${trial.status}, it measured nothing` : "–";
+  }
+  const total = trial.result?.n_items;
+  return response.unit === "items" && total ? `${fmt(value, 4)} of ${total} items` : withUnit(value, response, 4);
+}
+
+function facts(trial, declared, experiments) {
   const r = trial.result || {};
+  const unit = f1Unit(experiments);
   const rows = [
     ...PARAMETERS.map((p) => [p.title, fmt(trial.params?.[p.key], 4)]),
     ["seed", trial.seed],
     ["generation · individual · replicate", `${trial.generation} · ${trial.individual} · ${trial.replicate}`],
     ["state / simulation status", `${trial.state} / ${trial.status ?? "–"}`],
-    ["items remaining N_t", trial.n_remaining !== null ? `${trial.n_remaining} of ${r.n_items ?? "?"} items`
-      : (trial.status && trial.status !== "ok" ? `none: the run ended ${trial.status}, it measured nothing` : "–")],
-    ["f1 = |N_t − target|", trial.f1 !== null ? `${fmt(trial.f1)} items` : "–"],
+    ...declared.map((response) => [responseText(response), responseValue(trial, response)]),
+    [experiments.length === 1 ? `f1 = |${responseText(experiments[0])} − target|` : "f1 = max |simulated − target| / tolerance",
+      trial.f1 !== null ? `${fmt(trial.f1)}${unit === "–" ? "" : ` ${unit}`}` : "–"],
     ["Pareto member", trial.pareto ? "yes" : "no"],
     ["wall time T", fmtSeconds(trial.wall_time_s)],
     ["cost", fmt(trial.cost)],
@@ -43,10 +55,13 @@ function facts(trial) {
     ...rows.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: String(v) })]));
 }
 
-// Items remaining: a step down at every discharge time, flat to the end of the run.
-async function dischargePlot(trial, target) {
+// Items remaining: a step down at every discharge time, flat to the end of the run. The target is
+// drawn when the study's one experiment is on that count (its response is counted in items).
+async function dischargePlot(trial, experiments) {
   const r = trial.result;
   const box = document.getElementById("discharge-plot");
+  // A scenario that records no discharge curve (a heap) has no card for it.
+  box.closest(".card").hidden = trial.state === "done" && !r?.discharge_times?.length;
   if (!r || !r.discharge_times?.length) {
     box.replaceChildren(el("p", { class: "muted", text: "No result yet: the curve appears when the simulation has finished." }));
     return;
@@ -60,9 +75,11 @@ async function dischargePlot(trial, target) {
     type: "scatter", mode: "lines", name: "simulation", x, y, line: { shape: "hv", color: "#0072b2", width: 2.5 },
     hovertemplate: "t = %{x:.2f} s<br>%{y} items in the tray<extra></extra>",
   }];
+  const counted = experiments.length === 1 && experiments[0].unit === "items" ? experiments[0] : null;
+  const target = counted ? counted.target : NaN;
   if (Number.isFinite(target)) {
     data.push({
-      type: "scatter", mode: "lines", name: `experimental target N<sub>t</sub> = ${fmt(target)}`,
+      type: "scatter", mode: "lines", name: `experimental target ${responseHtml(counted)} = ${fmt(target)}`,
       x: [0, end], y: [target, target], line: { color: "#d55e00", dash: "dash", width: 2 }, hoverinfo: "skip",
     });
   }
@@ -251,14 +268,15 @@ async function replay() {
   section.dataset.replayFrames = String(count);
 }
 
-function showTrial(trial, target) {
+function showTrial(trial, study) {
   document.getElementById("trial-status").replaceWith(
     Object.assign(statusBadge(trial.status || trial.state), { id: "trial-status" }));
   const message = document.getElementById("trial-message");
   message.textContent = trial.message || "";
   message.hidden = !trial.message;
-  facts(trial);
-  return dischargePlot(trial, target);
+  const experiments = experimentResponses(study);
+  facts(trial, study.responses || [], experiments);
+  return dischargePlot(trial, experiments);
 }
 
 // A trial that is still queued or running is re-read every few seconds until it has a result;
@@ -275,10 +293,9 @@ async function start() {
     return;
   }
   const study = await api(`/studies/${encodeURIComponent(studyId)}`);
-  const target = targetOf(study.definition);
   poll(async () => {
     const trial = await api(trialPath);
-    await showTrial(trial, target);
+    await showTrial(trial, study);
     const finished = trial.state === "done" || trial.state === "cancelled";
     if (finished) await replay();
     section.dataset.loaded = "1";
