@@ -97,6 +97,10 @@ class TrialPage(_Wire):
     )
 
 
+F1_UNIT = ("f1's unit: the response's for one experiment, '1' for several (each distance is divided "
+           "by its tolerance).")
+
+
 class StudyListItem(_Wire):
     id: str
     name: str
@@ -116,6 +120,7 @@ class StudyListItem(_Wire):
         "equivalent sets (GET /api/v1/studies/{id}/recommendation has them)."
     )
     best_f1: float | None = Field(None, description="The lowest f1 of an ok trial so far.")
+    f1_unit: str = Field("1", description=F1_UNIT)
     failures: Failures | None = Field(None, description="Finished trials that measured no N_t, by status.")
 
 
@@ -162,6 +167,7 @@ class StudyRead(_Wire):
     responses: list[ResponseRead] = Field(
         default_factory=list, description="What the study's scenario measures, with units."
     )
+    f1_unit: str = Field("1", description=F1_UNIT)
 
 
 class Spread(_Wire):

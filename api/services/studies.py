@@ -116,6 +116,7 @@ def get_study(
         recommendation=row.recommendation, warnings=_warnings(store, row),
         created_at=row.created_at, updated_at=row.updated_at,
         started_at=row.started_at, finished_at=row.finished_at, responses=declared_responses(row.definition),
+        f1_unit=f1_unit(row.definition),
     )
 
 
@@ -159,6 +160,7 @@ def list_studies(
                 created_at=row.created_at, updated_at=row.updated_at, started_at=row.started_at,
                 finished_at=row.finished_at, recommendation=_compact(row.recommendation),
                 best_f1=best_f1.get(row.id), failures=_failures(statuses.get(row.id, {})),
+                f1_unit=f1_unit(row.definition),
             )
         )
     return StudyPage(items=items, total=page.total, limit=limit, offset=offset)
@@ -196,3 +198,13 @@ def declared_responses(definition: dict) -> list[ResponseRead]:
         return [ResponseRead(**r.as_dict()) for r in scenario.declared(scenario_config)]
     except (UnknownScenarioError, ValueError):
         return []
+
+
+def f1_unit(definition: dict) -> str:
+    """The unit of the study's f1 (optimizer/objectives.py): one experiment's distance is in its
+    response's unit; several are each divided by their tolerance, so their maximum has none."""
+    experiments = definition.get("experiments") or [definition.get("experiment") or {}]
+    declared = {r.name: r.unit for r in declared_responses(definition)}
+    if len(experiments) != 1 or not declared:
+        return "1"
+    return declared.get(experiments[0].get("response") or next(iter(declared)), "1")

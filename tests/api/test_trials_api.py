@@ -150,6 +150,9 @@ def test_study_declares_its_responses_with_units_and_trials_carry_them(client, k
             "label": "N_t",
         }
     ]
+    assert body["f1_unit"] == "items"
+    listed = client.get("/api/v1/studies", headers=keys.auth()).json()["items"]
+    assert [item["f1_unit"] for item in listed] == ["items"]
     trials = client.get(f"/api/v1/studies/{finished}/trials", headers=keys.auth()).json()["items"]
     done = [item for item in trials if item["status"] == "ok"]
     assert done and all(item["responses"] == {"n_remaining": item["n_remaining"]} for item in done)
@@ -172,6 +175,7 @@ def test_a_heap_study_declares_its_angle_with_its_unit(client, keys):
         ("height", "m", "real"),
     ]
     assert body["definition"]["experiments"][0]["round"] == "none"
+    assert body["f1_unit"] == "deg"  # f1 = |angle - target|
     bad = client.post(
         "/api/v1/studies",
         json=study_definition(
@@ -188,6 +192,7 @@ def test_csv_has_a_column_per_declared_response_headed_with_its_unit(client, key
     from tests.dashboard.seed import seed_heap_study
 
     seeded = seed_heap_study(store, with_feeder=True)
+    study = client.get(f"/api/v1/studies/{seeded.study_id}", headers=keys.auth()).json()
     response = client.get(f"/api/v1/studies/{seeded.study_id}/export.csv", headers=keys.auth())
     rows = list(csv.DictReader(io.StringIO(response.text)))
 
@@ -199,3 +204,4 @@ def test_csv_has_a_column_per_declared_response_headed_with_its_unit(client, key
     measured = [row for row in rows if row["trial_id"] not in seeded.failed]
     assert all(row["failure"] == "" and all(row[c] for c in columns) for row in measured)
     assert {float(row["heap.height [m]"]) for row in measured} == {0.04}
+    assert study["f1_unit"] == "1"  # each experiment's distance over its tolerance

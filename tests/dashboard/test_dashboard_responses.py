@@ -74,6 +74,10 @@ def test_heap_study_shows_the_angle_of_repose_in_degrees_and_no_n_t(page, dashbo
     assert not mentions_n_t(json.dumps(figures, ensure_ascii=False), body)
     assert page.errors == []
     save_screenshot(page, "dashboard-heap")
+    page.goto(dashboard.url("/"))
+    listed = page.locator(f"tr[data-study-id='{heap.study_id}'] td").nth(4)
+    listed.wait_for()
+    assert listed.inner_text() == f"no match yet; best f1 so far {min(heap.f1.values()):.3g} deg"
 
 
 def test_heap_trial_page_shows_the_declared_responses_with_units(page, dashboard, heap):

@@ -161,12 +161,13 @@ const escapeHtml = (text) => text.replace(/&/g, "&amp;").replace(/</g, "&lt;").r
 // Plain text ("N_t", "angle of repose") for tables and captions; plotly's HTML ("N<sub>t</sub>").
 export const responseText = (r) => r.label || r.name;
 export const responseHtml = (r) => escapeHtml(responseText(r)).replace(/_(\w+)/g, "<sub>$1</sub>");
-export const unitOf = (r) => (r.unit === "1" ? "–" : r.unit);
+const pure = (r) => !r.unit || r.unit === "1";
+export const unitOf = (r) => (pure(r) ? "–" : r.unit);
 
 // "31.2 deg", "3 items", "0.25" (a pure number has no unit).
 export function withUnit(value, r, digits = 3) {
   if (value === null || value === undefined) return "–";
-  return r.unit === "1" ? fmt(value, digits) : `${fmt(value, digits)} ${r.unit}`;
+  return pure(r) ? fmt(value, digits) : `${fmt(value, digits)} ${r.unit}`;
 }
 
 // A finished run's measured value of a response; null for a run that measured nothing.

@@ -69,15 +69,11 @@ function customdata(trials, responses) {
   ]);
 }
 
-// What the study's f1 is and in which unit: one experiment's distance is in its response's unit;
-// several are each divided by their tolerance and the worst is taken (optimizer/objectives.py).
-export function f1Unit(responses) {
-  return responses.length === 1 ? unitOf(responses[0]) : "–";
-}
-
-function f1Title(responses) {
-  if (responses.length !== 1) return "f1 = max |simulated − target| / tolerance (–)";
-  return `f1 = |${responseHtml(responses[0])} − target| (${f1Unit(responses)})`;
+// What the study's f1 is, in its unit (the API's f1_unit: one experiment's distance is in its
+// response's unit; several are each divided by their tolerance, optimizer/objectives.py).
+function f1Title(responses, f1unit) {
+  if (responses.length !== 1) return `f1 = max |simulated − target| / tolerance (${unitOf({ unit: f1unit })})`;
+  return `f1 = |${responseHtml(responses[0])} − target| (${unitOf({ unit: f1unit })})`;
 }
 
 // What a failed run lacks, for captions and hover texts: "no N<sub>t</sub>".
@@ -159,7 +155,7 @@ function failedCustomdata(trials, failures, responses) {
 // outlined diamonds on top, so the front stands out without relying on colour alone. Then one
 // trace per failed status, in a strip of its own above the plot at the runs' real x: they sit
 // apart from the measured points, never at a made-up f1.
-export function paretoFigure(trials, xKey, maxGeneration, responses) {
+export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit) {
   const x = X_AXES[xKey];
   const failures = individualFailures(trials);
   const failedOf = (t) => t.state === "done" && failures.get(t.individual);
@@ -203,7 +199,7 @@ export function paretoFigure(trials, xKey, maxGeneration, responses) {
   });
   const layout = baseLayout({
     xaxis: axis(x.title),
-    yaxis: axis(f1Title(responses), {
+    yaxis: axis(f1Title(responses, f1unit), {
       range: fromZero(shown, (t) => t.f1), domain: rows.length ? [0, 0.78] : [0, 1],
     }),
     yaxis2: axis("", {
@@ -331,8 +327,8 @@ export function generationFigure(trials, responses, maxGeneration) {
 // Progress against simulations (GET /studies/{id}/progress): the hypervolume of what was
 // measured (left axis, a fraction of the study's fixed reference box) and the best f1 and best
 // validated f1 (right axis, in f1's unit), one point per completed batch.
-export function progressFigure(progress, responses) {
-  const unit = f1Unit(responses);
+export function progressFigure(progress, f1unit) {
+  const unit = unitOf({ unit: f1unit });
   const inUnit = unit === "–" ? "" : ` ${unit}`;
   const points = progress.points || [];
   const sims = points.map((p) => p.simulations);
@@ -377,7 +373,7 @@ export function progressFigure(progress, responses) {
 // One panel per searched parameter: values against generation with the median; fixed ones
 // skipped. A large study gets a box per generation instead of its points: four panels of
 // 10,000 coloured points cost seconds to draw, and the boxes show the narrowing just as well.
-export function parameterFigure(trials, bounds, maxGeneration, responses) {
+export function parameterFigure(trials, bounds, maxGeneration, responses, f1unit) {
   const free = PARAMETERS.filter((p) => !bounds[p.key] || bounds[p.key].fixed == null);
   const all = trials.filter((t) => t.params && t.state !== "cancelled");
   const boxes = all.length > WEBGL_ABOVE;
@@ -411,7 +407,7 @@ export function parameterFigure(trials, bounds, maxGeneration, responses) {
         customdata: customdata(done, responses), hovertemplate: HOVER,
         marker: { size: 6, color: done.map((t) => t.f1), colorscale: "Cividis", reversescale: true,
           cmin: 0, showscale: i === 0, line: { width: 0.6, color: "#3b3b3b" },
-          colorbar: { title: { text: `f1 (${f1Unit(responses)})` }, thickness: 12, len: 0.8 } },
+          colorbar: { title: { text: `f1 (${unitOf({ unit: f1unit })})` }, thickness: 12, len: 0.8 } },
       });
       data.push({
         type: "scatter", mode: "markers", name: `failed (${noneHtml(responses)})`, showlegend: i === 0,

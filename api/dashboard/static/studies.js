@@ -3,7 +3,7 @@
 // request per refresh: the list items carry everything the table shows.
 
 import {
-  PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, poll, showBanner, statusBadge,
+  PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, poll, showBanner, statusBadge, withUnit,
 } from "./api.js";
 
 const POLL_MS = 4000;
@@ -16,7 +16,7 @@ function recommendationText(item) {
   const rec = item.recommendation;
   if (rec?.params) return paramsText(rec.params);
   if (item.best_f1 !== null && item.best_f1 !== undefined) {
-    return `no match yet; best f1 so far ${fmt(item.best_f1)} items`;
+    return `no match yet; best f1 so far ${withUnit(item.best_f1, { unit: item.f1_unit })}`;
   }
   return "–";
 }

@@ -11,7 +11,7 @@ import {
   withUnit,
 } from "./api.js";
 import {
-  CONFIG, f1Unit, generationFigure, paretoFigure, parameterFigure, progressFigure,
+  CONFIG, generationFigure, paretoFigure, parameterFigure, progressFigure,
 } from "./plots.js";
 
 const studyId = document.getElementById("study").dataset.studyId;
@@ -98,7 +98,7 @@ async function renderPlots() {
   const list = [...trials.values()];
   const xKey = document.getElementById("pareto-x").value;
   const gmax = maxGeneration();
-  const pareto = paretoFigure(list, xKey, gmax, responses);
+  const pareto = paretoFigure(list, xKey, gmax, responses, study.f1_unit);
   Plotly.react("pareto-plot", pareto.data, pareto.layout, CONFIG);
   const caption = document.getElementById("pareto-caption");
   const pending = pareto.hidden;
@@ -120,7 +120,7 @@ async function renderPlots() {
     ? `${520 + 300 * (responses.length - 1)}px` : "";
   const gen = generationFigure(searched, responses, gmax);
   Plotly.react("generation-plot", gen.data, gen.layout, CONFIG);
-  const par = parameterFigure(searched, study.definition?.parameters || {}, gmax, responses);
+  const par = parameterFigure(searched, study.definition?.parameters || {}, gmax, responses, study.f1_unit);
   Plotly.react("parameter-plot", par.data, par.layout, CONFIG);
   // A point can be clicked as soon as it is drawn, not only once the slower tables have loaded.
   bindClicks();
@@ -177,7 +177,7 @@ async function renderRecommendation() {
       else if (values !== undefined && values !== null) rows.push([`${label} (${unitOf(r)})`, fmt(values, 4)]);
     }
     if (rec.f1 !== undefined && rec.f1 !== null) {
-      rows.push([`f1 (${f1Unit(responses)})`, `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
+      rows.push([`f1 (${unitOf({ unit: study.f1_unit })})`, `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
     }
     if (rec.replicates) rows.push(["replicates in the search", String(rec.replicates)]);
     for (const [key, label] of [["wall_time_s", "T (s)"], ["cost", "cost"]]) {
@@ -247,7 +247,7 @@ async function renderProgress() {
     api(`${base}/progress`), api(`${base}/identifiability`),
   ]);
   await plotlyReady();
-  const figure = progressFigure(progress, responses);
+  const figure = progressFigure(progress, study.f1_unit);
   Plotly.react("progress-plot", figure.data, figure.layout, CONFIG);
   document.getElementById("progress-caption").textContent = figure.caption;
   renderIdentifiability(identified);

@@ -7,7 +7,7 @@ import {
   ApiError, PARAMETERS, api, apiKey, el, experimentResponses, fmt, fmtSeconds, fmtTime, measuredValue,
   plotlyReady, poll, responseHtml, responseText, showBanner, statusBadge, withUnit,
 } from "./api.js";
-import { CONFIG, baseLayout, f1Unit } from "./plots.js";
+import { CONFIG, baseLayout } from "./plots.js";
 
 const section = document.getElementById("trial");
 const trialId = section.dataset.trialId;
@@ -28,9 +28,8 @@ function responseValue(trial, response) {
   return response.unit === "items" && total ? `${fmt(value, 4)} of ${total} items` : withUnit(value, response, 4);
 }
 
-function facts(trial, declared, experiments) {
+function facts(trial, declared, experiments, f1unit) {
   const r = trial.result || {};
-  const unit = f1Unit(experiments);
   const rows = [
     ...PARAMETERS.map((p) => [p.title, fmt(trial.params?.[p.key], 4)]),
     ["seed", trial.seed],
@@ -38,7 +37,7 @@ function facts(trial, declared, experiments) {
     ["state / simulation status", `${trial.state} / ${trial.status ?? "–"}`],
     ...declared.map((response) => [responseText(response), responseValue(trial, response)]),
     [experiments.length === 1 ? `f1 = |${responseText(experiments[0])} − target|` : "f1 = max |simulated − target| / tolerance",
-      trial.f1 !== null ? `${fmt(trial.f1)}${unit === "–" ? "" : ` ${unit}`}` : "–"],
+      trial.f1 !== null ? withUnit(trial.f1, { unit: f1unit }) : "–"],
     ["Pareto member", trial.pareto ? "yes" : "no"],
     ["wall time T", fmtSeconds(trial.wall_time_s)],
     ["cost", fmt(trial.cost)],
@@ -275,7 +274,7 @@ function showTrial(trial, study) {
   message.textContent = trial.message || "";
   message.hidden = !trial.message;
   const experiments = experimentResponses(study);
-  facts(trial, study.responses || [], experiments);
+  facts(trial, study.responses || [], experiments, study.f1_unit);
   return dischargePlot(trial, experiments);
 }
 
