@@ -168,6 +168,10 @@ class StudyRead(_Wire):
         default_factory=list, description="What the study's scenario measures, with units."
     )
     f1_unit: str = Field("1", description=F1_UNIT)
+    f1_rule: str = Field(
+        "", description="f1 in words, as the search computes it (W1 of the replicates to the measured "
+        "values, or the distance of their aggregate to the target); '' if the definition no longer validates."
+    )
 
 
 class Spread(_Wire):

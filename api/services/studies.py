@@ -24,6 +24,7 @@ from api.services.shapes import attach_uploaded_shapes
 from api.services.trials import trial_read
 from api.services.views import StudyViewCache
 from api.store import SqlStore
+from optimizer.objectives import f1_rule
 from optimizer.outcomes import failures_from_counts
 from optimizer.protocols import StudyStatus, TrialState
 from optimizer.study import StudyDefinition, StudyLimitError, check_limits
@@ -116,7 +117,7 @@ def get_study(
         recommendation=row.recommendation, warnings=_warnings(store, row),
         created_at=row.created_at, updated_at=row.updated_at,
         started_at=row.started_at, finished_at=row.finished_at, responses=declared_responses(row.definition),
-        f1_unit=f1_unit(row.definition),
+        f1_unit=f1_unit(row.definition), f1_rule=_f1_rule(row.definition),
     )
 
 
@@ -198,6 +199,15 @@ def declared_responses(definition: dict) -> list[ResponseRead]:
         return [ResponseRead(**r.as_dict()) for r in scenario.declared(scenario_config)]
     except (UnknownScenarioError, ValueError):
         return []
+
+
+def _f1_rule(definition: dict) -> str:
+    """``optimizer.objectives.f1_rule`` of a stored definition: the views title f1 with the
+    formula the search used, never a guess."""
+    try:
+        return f1_rule(StudyDefinition.model_validate(definition))
+    except ValueError:
+        return ""
 
 
 def f1_unit(definition: dict) -> str:

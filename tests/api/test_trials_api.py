@@ -11,6 +11,7 @@ import pytest
 
 from optimizer.driver import Driver
 from optimizer.memory import SyntheticExecutor
+from optimizer.objectives import f1_rule
 from optimizer.study import StudyDefinition
 from tests.api.conftest import study_definition
 
@@ -151,6 +152,10 @@ def test_study_declares_its_responses_with_units_and_trials_carry_them(client, k
         }
     ]
     assert body["f1_unit"] == "items"
+    assert body["f1_rule"] == "|median(n_remaining) - 4|"  # one replicate: the median's distance
+    # With replicates, the search's f1 is W1 to the measured values, and the study says so.
+    wide = StudyDefinition.model_validate(study_definition(replicates=3))
+    assert f1_rule(wide).startswith("W1(n_remaining of the replicates")
     listed = client.get("/api/v1/studies", headers=keys.auth()).json()["items"]
     assert [item["f1_unit"] for item in listed] == ["items"]
     trials = client.get(f"/api/v1/studies/{finished}/trials", headers=keys.auth()).json()["items"]

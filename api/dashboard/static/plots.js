@@ -70,10 +70,14 @@ function customdata(trials, responses) {
 }
 
 // What the study's f1 is, in its unit (the API's f1_unit: one experiment's distance is in its
-// response's unit; several are each divided by their tolerance, optimizer/objectives.py).
-function f1Title(responses, f1unit) {
-  if (responses.length !== 1) return `f1 = max |simulated − target| / tolerance (${unitOf({ unit: f1unit })})`;
-  return `f1 = |${responseHtml(responses[0])} − target| (${unitOf({ unit: f1unit })})`;
+// response's unit; several are each divided by their tolerance, optimizer/objectives.py). With one
+// experiment the API's f1_rule says which distance the search used (W1 of the replicates or the
+// aggregate's), written with the responses' labels.
+function f1Title(responses, f1unit, rule) {
+  const unit = `(${unitOf({ unit: f1unit })})`;
+  if (responses.length !== 1) return `f1 = max |simulated − target| / tolerance ${unit}`;
+  if (!rule) return `f1 = |${responseHtml(responses[0])} − target| ${unit}`;
+  return `f1 = ${rule.replaceAll(responses[0].name, responseHtml(responses[0])).replaceAll(" - ", " − ")} ${unit}`;
 }
 
 // What a failed run lacks, for captions and hover texts: "no N<sub>t</sub>".
@@ -155,7 +159,7 @@ function failedCustomdata(trials, failures, responses) {
 // outlined diamonds on top, so the front stands out without relying on colour alone. Then one
 // trace per failed status, in a strip of its own above the plot at the runs' real x: they sit
 // apart from the measured points, never at a made-up f1.
-export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit) {
+export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit, f1rule = "") {
   const x = X_AXES[xKey];
   const failures = individualFailures(trials);
   const failedOf = (t) => t.state === "done" && failures.get(t.individual);
@@ -199,7 +203,7 @@ export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit) {
   });
   const layout = baseLayout({
     xaxis: axis(x.title),
-    yaxis: axis(f1Title(responses, f1unit), {
+    yaxis: axis(f1Title(responses, f1unit, f1rule), {
       range: fromZero(shown, (t) => t.f1), domain: rows.length ? [0, 0.78] : [0, 1],
     }),
     yaxis2: axis("", {

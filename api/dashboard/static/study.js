@@ -98,7 +98,7 @@ async function renderPlots() {
   const list = [...trials.values()];
   const xKey = document.getElementById("pareto-x").value;
   const gmax = maxGeneration();
-  const pareto = paretoFigure(list, xKey, gmax, responses, study.f1_unit);
+  const pareto = paretoFigure(list, xKey, gmax, responses, study.f1_unit, study.f1_rule);
   Plotly.react("pareto-plot", pareto.data, pareto.layout, CONFIG);
   const caption = document.getElementById("pareto-caption");
   const pending = pareto.hidden;
