@@ -3,10 +3,12 @@
 Two views, both from a study's own simulations (no new runs):
 
 - **Sensitivity** of the response: variance-based (Sobol) indices of the surrogate's mean of
-  ``2 sqrt(N_t + 3/8)`` over the search box (the same Gaussian process the surrogate search
-  fits, ``optimizer/surrogate.py``), estimated with Saltelli's first-order and Jansen's total
-  estimators on a scrambled Sobol sample. A parameter with a small total index barely changes
-  N_t anywhere in the box: no N_t experiment can determine it. The fitted ARD length scale says
+  the first experiment's response (a count such as N_t through ``2 sqrt(N_t + 3/8)``, which makes
+  its noise even; a real value such as an angle as it is) over the search box (the same
+  Gaussian process the surrogate search fits, ``optimizer/surrogate.py``), estimated with
+  Saltelli's first-order and Jansen's total estimators on a scrambled Sobol sample. A parameter
+  with a small total index barely changes the response anywhere in the box: no experiment on
+  that response can determine it. The fitted ARD length scale says
   the same in other words (long = flat) and is reported beside it.
 - **Spread of the matching sets**: the range of each parameter over the sets that matched,
   as a share of its searched range (log scale for E). A parameter that matches across most of
@@ -70,11 +72,29 @@ def _verdict(total: float, spread: float | None) -> str:
     return "weak"
 
 
-def identifiability(evaluations: Sequence[Evaluation], space: ParameterSpace, tolerance: float) -> dict:
-    """Per free parameter: Sobol indices, length scale, the matching sets' range and a verdict."""
-    rows = [(space.genes(ev.params), n) for ev in evaluations if ev.ok for n in ev.n_remaining]
+def identifiability(
+    evaluations: Sequence[Evaluation],
+    space: ParameterSpace,
+    tolerance: float,
+    *,
+    response: str = "",
+    label: str = "N_t",
+    count: bool = True,
+) -> dict:
+    """Per free parameter: Sobol indices, length scale, the matching sets' range and a verdict.
+
+    ``response`` names the experiment's response in ``Evaluation.responses`` (default: the
+    first experiment's, ``n_remaining``); ``count`` says it counts (Anscombe transform);
+    ``tolerance`` is the study's match tolerance on f1."""
+    rows = [
+        (space.genes(ev.params), n)
+        for ev in evaluations
+        if ev.ok
+        for n in (ev.responses.get(response, ev.n_remaining) if response else ev.n_remaining)
+    ]
+    modelled = f"2 sqrt({label} + 3/8)" if count else label
     result: dict = {
-        "method": "Sobol indices of a Gaussian-process mean of 2 sqrt(N_t + 3/8) over the search "
+        "method": f"Sobol indices of a Gaussian-process mean of {modelled} over the search "
         "box; spread of the matching sets in units of the searched range",
         "simulations": len(rows),
         "parameters": [],
@@ -84,9 +104,10 @@ def identifiability(evaluations: Sequence[Evaluation], space: ParameterSpace, to
         result["reason"] = f"{len(rows)} successful simulations; at least {MIN_SIMULATIONS} are needed"
         return result
     genes = np.array([gene for gene, _ in rows])
-    values = anscombe(np.array([n for _, n in rows]))
+    raw = np.array([n for _, n in rows], dtype=float)
+    values = anscombe(raw) if count else raw
     if np.ptp(values) == 0:
-        result["reason"] = f"every simulation gave N_t = {rows[0][1]}: the response does not vary"
+        result["reason"] = f"every simulation gave {label} = {rows[0][1]:g}: the response does not vary"
         return result
     if len(genes) > MAX_GP_POINTS:
         pick = np.sort(np.random.default_rng(0).choice(len(genes), MAX_GP_POINTS, replace=False))
@@ -115,3 +136,15 @@ def identifiability(evaluations: Sequence[Evaluation], space: ParameterSpace, to
             }
         )
     return result
+
+
+def study_identifiability(evaluations: Sequence[Evaluation], definition, space: ParameterSpace) -> dict:
+    """``identifiability`` of a study: its first experiment's response, declared unit and kind,
+    and the study's own match tolerance (f1 of several experiments is in tolerances)."""
+    name = definition.experiments[0].response
+    declared = definition.declared_responses().get(name)
+    return identifiability(
+        evaluations, space, definition.match_tolerance(), response=name,
+        label=(declared.label or name) if declared else name,
+        count=declared.integer if declared else True,
+    )

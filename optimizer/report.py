@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from optimizer.generations import Run, per_generation, spread
-from optimizer.identifiability import identifiability
+from optimizer.identifiability import study_identifiability
 from optimizer.objectives import Evaluation, evaluate, f1_rule
 from optimizer.outcomes import (
     count_failures,
@@ -171,7 +171,7 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         "progress": study_progress(
             records, definition, study.generation, (study.recommendation or {}).get("validation", [])
         ).as_json(),
-        "identifiability": identifiability(evaluations, space, experiment.tolerance),
+        "identifiability": study_identifiability(evaluations, definition, space),
     }
 
 

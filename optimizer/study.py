@@ -473,6 +473,12 @@ class StudyDefinition(_Strict):
         failed = for_config(self.scenario).failed_responses(self.scenario)
         return failed[self.experiments[0].response]
 
+    def declared_responses(self) -> dict:
+        """The scenario's responses by name (``dem.scenarios.base.Response``: unit, integer, label)."""
+        from dem.scenarios.registry import for_config
+
+        return {r.name: r for r in for_config(self.scenario).declared(self.scenario)}
+
     def failed_responses(self) -> dict[str, float]:
         """Every response's value for a failed simulation."""
         from dem.scenarios.registry import for_config

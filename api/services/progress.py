@@ -14,7 +14,7 @@ from api.auth import Principal
 from api.schemas import IdentifiabilityRead, StudyProgressRead
 from api.services.views import StudyViewCache
 from api.store import SqlStore
-from optimizer.identifiability import identifiability
+from optimizer.identifiability import study_identifiability
 from optimizer.objectives import evaluate
 from optimizer.progress import study_progress
 from optimizer.space import ParameterSpace
@@ -44,7 +44,7 @@ def identifiability_json(
         definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
         evaluations = evaluate(store.trials(study_id), definition, definition.n_items())
         space = ParameterSpace(definition.parameters)
-        result = identifiability(evaluations, space, definition.experiment.tolerance)
+        result = study_identifiability(evaluations, definition, space)
         return IdentifiabilityRead(study_id=study_id, **result).model_dump_json().encode()
 
     version = (study.updated_at, study.generation)

@@ -78,3 +78,39 @@ def test_a_large_study_is_assessed_from_a_bounded_subsample_with_the_same_verdic
     by_name = {row["name"]: row for row in result["parameters"]}
     assert by_name["nu"]["total"] < 0.02 and by_name["E"]["total"] < 0.02
     assert by_name["mu"]["total"] > by_name["e"]["total"] > 0.02
+
+
+def test_a_second_experiments_real_response_is_assessed_as_it_is_not_as_a_count():
+    """A heap's angle (real, degrees) beside N_t: the study's first experiment names the angle,
+    which depends on mu only; modelled as it is, not through the count transform of N_t."""
+    space = ParameterSpace(Parameters())
+    rng = np.random.default_rng(1)
+    evaluations = []
+    for individual, genes in enumerate(rng.random((60, 4))):
+        angle = 20.0 + 15.0 * genes[3]  # grows with mu, nothing else
+        n_t = int(round(30 * genes[2]))  # N_t driven by e only, to be ignored here
+        evaluations.append(Evaluation(individual, 0, space.params(genes), 1.0, 1.0, [n_t], 1.0, 1.0,
+                                      responses={"n_remaining": [n_t], "angle_deg": [angle]}))
+
+    result = identifiability(evaluations, space, 1.0, response="angle_deg", label="angle of repose",
+                             count=False)
+
+    by_name = {row["name"]: row for row in result["parameters"]}
+    assert "mean of angle of repose" in result["method"]
+    assert by_name["mu"]["total"] > 0.9
+    assert by_name["e"]["total"] < 0.02
+
+
+def test_the_study_view_uses_the_first_experiments_declared_response():
+    from optimizer.identifiability import study_identifiability
+    from optimizer.study import StudyDefinition
+
+    heap = StudyDefinition.model_validate({
+        "name": "heap", "scenario": {"kind": "angle_of_repose"},
+        "experiment": {"response": "angle_deg", "measured": [31.0, 33.0, 32.0], "tolerance": 1.5},
+    })
+    evaluations, space = synthetic_study(5)
+
+    result = study_identifiability(evaluations, heap, space)
+
+    assert "angle of repose" in result["method"] and "sqrt" not in result["method"]
