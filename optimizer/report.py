@@ -268,13 +268,20 @@ def write_pareto_png(
             cmap="viridis",
             s=18,
         )
-        fig.colorbar(points, ax=[left_failed, left], label="generation")
+        bar = fig.colorbar(points, ax=[left_failed, left], label="generation")
+        bar.locator = MaxNLocator(integer=True)  # generations are whole numbers
+        bar.update_ticks()
     real_f2 = [ev.wall_time_s if wall else ev.cost for ev in evaluations]
-    if real_f2 and min(real_f2) > 0:
+    # Log only where f2 spans a decade or more: on a narrower span matplotlib labels minor ticks,
+    # which overlap into an unreadable axis.
+    if real_f2 and min(real_f2) > 0 and max(real_f2) >= 10 * min(real_f2):
         left.set_xscale("log")
     front = [member for member in summary_json["pareto"] if not member.get("failure")]
     if front:
-        left.plot([ev["f2"] for ev in front], [ev["f1"] for ev in front], "k-", lw=1, label="Pareto front")
+        # The attained front is a staircase (nothing is known between members), as on the dashboard.
+        front = sorted(front, key=lambda ev: ev["f2"])
+        left.plot([ev["f2"] for ev in front], [ev["f1"] for ev in front], "k-", lw=1, drawstyle="steps-post",
+                  label="Pareto front")
     left.axhline(summary_json["tolerance"], color="tab:red", ls="--", lw=1, label="tolerance")
     chosen = summary_json["recommendation"]
     if chosen:
