@@ -110,7 +110,7 @@ def run_liggghts(executable: str, n: int, steps: int) -> tuple[float, float, str
         Path(tmp, "atoms.data").write_text("\n".join(lines) + "\n")
         materials = liggghts.MATERIAL_COMMANDS.format(E=E, nu=NU, e=E_REST, mu=MU, v_char=1.0)
         text = LIGGGHTS_INPUT.format(
-            header=liggghts.HEADER.format(skin=SKIN),
+            header=liggghts.header(SKIN),
             materials=materials,
             dt=DT,
             lo=-half,

@@ -130,7 +130,7 @@ def run_liggghts(executable: str, duration: float) -> tuple[float, float, float,
         materials = liggghts.MATERIAL_COMMANDS.format(E=E, nu=NU, e=E_REST, mu=MU, v_char=1.0)
         ux, _, uz = direction()
         text = LIGGGHTS_INPUT.format(
-            header=liggghts.HEADER.format(skin=SKIN),
+            header=liggghts.header(SKIN),
             materials=materials,
             dt=DT,
             ax=AMPLITUDE * ux,

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dem.contact import ContactParams, damping_ratio, restitution_with_clamp
-from dem.engines.liggghts import binary
+from dem.engines.liggghts import binary, input_header
 
 
 @dataclass(frozen=True)
@@ -126,18 +126,9 @@ def mapping(E, nu, e, mu, D, rho, v_char=1.0) -> Mapping:
     return Mapping(particles, wall_params, pair, wall, d_pair, d_wall)
 
 
-# The start of every benchmark input: granular atoms from ``atoms.data``, one process, SI units.
-HEADER = """
-atom_style granular
-atom_modify map array
-boundary f f f
-newton off
-communicate single vel yes
-units si
-read_data atoms.data
-neighbor {skin} bin
-neigh_modify delay 0
-"""
+def header(skin: float) -> str:
+    """The start of every benchmark input: the engine's own (``dem.engines.liggghts``)."""
+    return f"\n{input_header(skin)}\n"
 
 MATERIAL_COMMANDS = """
 fix m1 all property/global youngsModulus peratomtype {E}

@@ -74,6 +74,20 @@ def write_stl(path: Path, vertices: np.ndarray, faces: np.ndarray, name: str) ->
     path.write_text("\n".join(lines) + "\n")
 
 
+def input_header(skin: float) -> str:
+    """The start of every LIGGGHTS input demcal writes (the engine's and the benchmarks'):
+    granular atoms from ``atoms.data``, one process, SI units, a binned neighbour list."""
+    return f"""atom_style granular
+atom_modify map array
+boundary f f f
+newton off
+communicate single vel yes
+units si
+read_data atoms.data
+neighbor {skin:.9g} bin
+neigh_modify delay 0"""
+
+
 def material_fixes(params: dict[str, float], diameters: np.ndarray, masses: np.ndarray) -> str:
     """The ``fix property/global`` lines of the hooke/stiffness model for sphere types 1..n and
     the wall type n + 1 (see the module docstring for the mapping)."""
@@ -265,15 +279,7 @@ class HeapAdapter:
         skin = 0.5 * diameters[-1]
         script = f"""# demcal: angle of repose (dem/scenarios/heap.py) for LIGGGHTS, seed {seed}
 # E={params["E"]:.6g} nu={params["nu"]:.6g} e={params["e"]:.6g} mu={params["mu"]:.6g}
-atom_style granular
-atom_modify map array
-boundary f f f
-newton off
-communicate single vel yes
-units si
-read_data atoms.data
-neighbor {skin:.9g} bin
-neigh_modify delay 0
+{input_header(skin)}
 {material_fixes(params, diameters, masses)}
 pair_style gran {CONTACT_MODEL} {MODEL_SETTINGS}
 pair_coeff * *
