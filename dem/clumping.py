@@ -351,11 +351,7 @@ def _assemble(centres: np.ndarray, radius: np.ndarray, properties, max_error: fl
     return Clump(
         radius=np.asarray(radius, dtype=np.float64),
         offset=(centres - properties.com) @ properties.principal_axes,
-        mass=properties.mass,
-        inertia=properties.principal_moments,
-        volume=properties.volume,
-        com=properties.com,
-        axes=properties.principal_axes,
+        **properties.body_fields(),
         max_error=max_error,
         name=name,
     )

@@ -101,6 +101,13 @@ class MassProperties:
     principal_moments: np.ndarray
     principal_axes: np.ndarray
 
+    def body_fields(self) -> dict:
+        """What a body in its principal frame keeps of these (``Clump``, ``Polyhedron``)."""
+        return dict(
+            mass=self.mass, inertia=self.principal_moments, volume=self.volume, com=self.com,
+            axes=self.principal_axes,
+        )
+
 
 def _refuse_archives(data: bytes) -> None:
     for magic, kind in _ARCHIVE_MAGIC.items():

@@ -195,11 +195,7 @@ def _assemble(mesh_core, starts, counts, rounding, properties, name) -> Polyhedr
         piece_start=np.asarray(starts, dtype=np.int64),
         piece_count=np.asarray(counts, dtype=np.int64),
         rounding=float(rounding),
-        mass=properties.mass,
-        inertia=properties.principal_moments,
-        volume=properties.volume,
-        com=properties.com,
-        axes=properties.principal_axes,
+        **properties.body_fields(),
         name=name,
     )
 
