@@ -84,13 +84,17 @@ def _warnings(store: SqlStore, row) -> list[str]:
     return stored
 
 
-def _budget(definition: dict) -> tuple[int, int]:
-    """(simulations, generations) the definition allows; (0, 0) if it cannot be read."""
+def _parsed(definition: dict) -> StudyDefinition | None:
+    """The stored definition, validated once per read; None if it no longer validates."""
     try:
-        parsed = StudyDefinition.model_validate(definition)
+        return StudyDefinition.model_validate(definition)
     except ValueError:
-        return 0, 0
-    return parsed.total_simulations(), parsed.ga.generations
+        return None
+
+
+def _budget(parsed: StudyDefinition | None) -> tuple[int, int]:
+    """(simulations, generations) the definition allows; (0, 0) if it cannot be read."""
+    return (parsed.total_simulations(), parsed.ga.generations) if parsed else (0, 0)
 
 
 def get_study(
@@ -100,7 +104,8 @@ def get_study(
     the view cache: it changes only when objectives are written, which versions the study."""
     row = store.get_study(study_id, principal.visible_to)
     counts = store.trial_state_counts(study_id)
-    trials_total, generations_total = _budget(row.definition)
+    parsed = _parsed(row.definition)
+    trials_total, generations_total = _budget(parsed)
     best = _best_trial(store, row, views)
     failures = _failures(store.run_status_counts(study_id))
     return StudyRead(
@@ -117,7 +122,7 @@ def get_study(
         recommendation=row.recommendation, warnings=_warnings(store, row),
         created_at=row.created_at, updated_at=row.updated_at,
         started_at=row.started_at, finished_at=row.finished_at, responses=declared_responses(row.definition),
-        f1_unit=f1_unit(row.definition), f1_rule=_f1_rule(row.definition),
+        f1_unit=f1_unit(row.definition), f1_rule=f1_rule(parsed) if parsed else "",
     )
 
 
@@ -151,7 +156,7 @@ def list_studies(
     statuses = store.run_status_counts_many(ids)
     items = []
     for row in page.items:
-        trials_total, generations_total = _budget(row.definition)
+        trials_total, generations_total = _budget(_parsed(row.definition))
         items.append(
             StudyListItem(
                 id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status),
@@ -199,15 +204,6 @@ def declared_responses(definition: dict) -> list[ResponseRead]:
         return [ResponseRead(**r.as_dict()) for r in scenario.declared(scenario_config)]
     except (UnknownScenarioError, ValueError):
         return []
-
-
-def _f1_rule(definition: dict) -> str:
-    """``optimizer.objectives.f1_rule`` of a stored definition: the views title f1 with the
-    formula the search used, never a guess."""
-    try:
-        return f1_rule(StudyDefinition.model_validate(definition))
-    except ValueError:
-        return ""
 
 
 def f1_unit(definition: dict) -> str:
