@@ -1,18 +1,32 @@
-"""Export to VTK legacy files that ParaView opens: spheres as points with a radius (render them
-with the Glyph filter, scale by ``radius``), rounded polyhedra as their surfaces (triangles of
+"""Export to files that ParaView opens as a time series: spheres as points with a radius (render
+them with the Glyph filter, scale by ``radius``), rounded polyhedra as their surfaces (triangles of
 ``Polyhedron.surface_mesh``, placed by each body's pose) and walls as triangle polydata.
 
-ASCII legacy format, version 3.0: readable, diffable and supported by every ParaView. This
-module writes files only; it reads the simulation's state and never changes it.
+Each frame is three VTK XML PolyData files (``.vtp``, ASCII: readable, diffable), and each of the
+three streams has a ParaView collection (``spheres.pvd``, ``polyhedra.pvd``, ``walls.pvd``) that
+lists its frames with their simulated time, rewritten after every frame so that a run that was
+stopped still opens as the time series it wrote. A ``.pvd`` can only list XML files, which is why
+the frames are ``.vtp`` and not legacy ``.vtk``. This module writes files only; it reads the
+simulation's state and never changes it.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 
 from dem.polyhedra import Polyhedron
+
+STREAMS = ("spheres", "polyhedra", "walls")
+
+
+def _ascii(values: np.ndarray) -> str:
+    values = np.asarray(values)
+    if np.issubdtype(values.dtype, np.integer):
+        return " ".join(str(int(v)) for v in values.ravel())
+    return " ".join(f"{v:.9g}" for v in values.ravel())
 
 
 def _write_polydata(
@@ -23,36 +37,71 @@ def _write_polydata(
     point_data: dict[str, np.ndarray],
     title: str,
 ) -> Path:
-    lines = ["# vtk DataFile Version 3.0", title, "ASCII", "DATASET POLYDATA", f"POINTS {len(points)} double"]
-    lines += [f"{x:.9g} {y:.9g} {z:.9g}" for x, y, z in points]
-    size = sum(len(c) + 1 for c in cells)
-    lines.append(f"{cells_keyword} {len(cells)} {size}")
-    lines += [" ".join(str(v) for v in [len(c), *c]) for c in cells]
-    if point_data:
-        lines.append(f"POINT_DATA {len(points)}")
-        for name, values in point_data.items():
-            values = np.asarray(values)
-            if values.ndim == 2:
-                lines.append(f"VECTORS {name} double")
-                lines += [f"{a:.9g} {b:.9g} {c:.9g}" for a, b, c in values]
-            else:
-                kind = "int" if np.issubdtype(values.dtype, np.integer) else "double"
-                lines += [f"SCALARS {name} {kind} 1", "LOOKUP_TABLE default"]
-                lines += [f"{v:.9g}" if kind == "double" else str(int(v)) for v in values]
+    """One VTK XML PolyData file; ``cells_keyword`` is ``Verts`` (points) or ``Polys``."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    connectivity = np.array([v for c in cells for v in c], dtype=np.int64)
+    offsets = np.cumsum([len(c) for c in cells], dtype=np.int64)
+    counts = {"Verts": 0, "Polys": 0, cells_keyword: len(cells)}
+    lines = [
+        '<?xml version="1.0"?>',
+        f"<!-- {title} -->",
+        '<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">',
+        "<PolyData>",
+        f'<Piece NumberOfPoints="{len(points)}" NumberOfVerts="{counts["Verts"]}" NumberOfLines="0" '
+        f'NumberOfStrips="0" NumberOfPolys="{counts["Polys"]}">',
+        "<PointData>",
+    ]
+    for name, values in point_data.items():
+        values = np.asarray(values)
+        kind = "Int64" if np.issubdtype(values.dtype, np.integer) else "Float64"
+        components = values.shape[1] if values.ndim == 2 else 1
+        lines.append(
+            f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}" format="ascii">'
+            f"{_ascii(values)}</DataArray>"
+        )
+    lines += [
+        "</PointData>",
+        "<Points>",
+        f'<DataArray type="Float64" NumberOfComponents="3" format="ascii">{_ascii(points)}</DataArray>',
+        "</Points>",
+        f"<{cells_keyword}>",
+        f'<DataArray type="Int64" Name="connectivity" format="ascii">{_ascii(connectivity)}</DataArray>',
+        f'<DataArray type="Int64" Name="offsets" format="ascii">{_ascii(offsets)}</DataArray>',
+        f"</{cells_keyword}>",
+        "</Piece>",
+        "</PolyData>",
+        "</VTKFile>",
+    ]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     return path
 
 
+def _add_to_collection(collection: Path, t: float, frame_file: Path, frame: int) -> None:
+    """List ``frame_file`` at time ``t`` in the ``.pvd`` collection; frame 0 starts a new one."""
+    if frame > 0 and collection.is_file():
+        root = ElementTree.parse(collection).getroot()
+    else:
+        root = ElementTree.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
+        ElementTree.SubElement(root, "Collection")
+    ElementTree.SubElement(
+        root.find("Collection"), "DataSet", timestep=f"{t:.9g}", group="", part="0", file=frame_file.name
+    )
+    ElementTree.indent(root)
+    ElementTree.ElementTree(root).write(collection, xml_declaration=True, encoding="utf-8")
+
+
 def write_frame(sim, directory, frame: int) -> list[Path]:
-    """Frame number ``frame`` of a run: ``spheres_NNNNN.vtk``, ``polyhedra_NNNNN.vtk`` and
-    ``walls_NNNNN.vtk`` in ``directory``."""
+    """Frame number ``frame`` of a run: ``spheres_NNNNN.vtp``, ``polyhedra_NNNNN.vtp`` and
+    ``walls_NNNNN.vtp`` in ``directory``, each added to its stream's ``.pvd`` at ``sim.t``."""
     directory = Path(directory)
-    return [
-        write_spheres(sim, directory / f"spheres_{frame:05d}.vtk"),
-        write_polyhedra(sim, directory / f"polyhedra_{frame:05d}.vtk"),
-        write_walls(sim, directory / f"walls_{frame:05d}.vtk"),
-    ]
+    writers = {"spheres": write_spheres, "polyhedra": write_polyhedra, "walls": write_walls}
+    paths = []
+    for stream in STREAMS:
+        path = writers[stream](sim, directory / f"{stream}_{frame:05d}.vtp")
+        _add_to_collection(directory / f"{stream}.pvd", sim.t, path, frame)
+        paths.append(path)
+    return paths
 
 
 def write_spheres(sim, path) -> Path:
@@ -68,7 +117,7 @@ def write_spheres(sim, path) -> Path:
         "body": body[keep].astype(np.int64),
         "velocity": sim.bodies.vel[body[keep]],
     }
-    return _write_polydata(path, centres, "VERTICES", cells, data, f"demcal spheres t={sim.t:.9g}")
+    return _write_polydata(path, centres, "Verts", cells, data, f"demcal spheres t={sim.t:.9g}")
 
 
 def write_polyhedra(sim, path) -> Path:
@@ -93,7 +142,7 @@ def write_polyhedra(sim, path) -> Path:
         offset += len(vertices)
     data = {"body": np.concatenate(body), "velocity": np.concatenate(velocity)} if points else {}
     points = np.concatenate(points) if points else np.zeros((0, 3))
-    return _write_polydata(path, points, "POLYGONS", cells, data, f"demcal polyhedra t={sim.t:.9g}")
+    return _write_polydata(path, points, "Polys", cells, data, f"demcal polyhedra t={sim.t:.9g}")
 
 
 def write_walls(sim, path) -> Path:
@@ -108,4 +157,4 @@ def write_walls(sim, path) -> Path:
         offset += len(wall.vertices)
     points = np.concatenate(points) if points else np.zeros((0, 3))
     data = {"wall": np.concatenate(owner).astype(np.int64)} if owner else {}
-    return _write_polydata(path, points, "POLYGONS", cells, data, f"demcal walls t={sim.t:.9g}")
+    return _write_polydata(path, points, "Polys", cells, data, f"demcal walls t={sim.t:.9g}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from xml.etree import ElementTree
 
 import numpy as np
 import trimesh
@@ -13,7 +14,7 @@ from dem.convex import gjk_distance
 from dem.polyhedra import Polyhedron
 from dem.quaternion import from_axis_angle, matrix
 from dem.simulation import Simulation
-from dem.vtk import write_polyhedra, write_spheres, write_walls
+from dem.vtk import write_frame, write_polyhedra, write_spheres, write_walls
 from dem.walls import WallMesh
 
 
@@ -35,33 +36,61 @@ def falling_pair() -> Simulation:
     return sim
 
 
+def read_polydata(path) -> tuple[np.ndarray, list[list[int]], dict[str, np.ndarray]]:
+    """Points, cells and point data of a VTK XML PolyData file, read with a plain XML parser."""
+    piece = ElementTree.parse(path).getroot().find("PolyData/Piece")
+
+    def array(element) -> np.ndarray:
+        kind = int if element.get("type").startswith("Int") else float
+        values = np.array((element.text or "").split(), dtype=kind)
+        components = int(element.get("NumberOfComponents", "1"))
+        return values.reshape(-1, components) if components > 1 else values
+
+    points = array(piece.find("Points/DataArray")).reshape(-1, 3)
+    cells = []
+    for keyword in ("Verts", "Polys"):
+        block = piece.find(keyword)
+        if block is None:
+            continue
+        arrays = {a.get("Name"): array(a) for a in block.findall("DataArray")}
+        starts = np.concatenate([[0], arrays["offsets"]])[:-1].astype(int)
+        cells += [arrays["connectivity"][a:b].tolist() for a, b in zip(starts, arrays["offsets"], strict=True)]
+    assert int(piece.get("NumberOfPoints")) == len(points)
+    assert int(piece.get("NumberOfVerts")) + int(piece.get("NumberOfPolys")) == len(cells)
+    data = {a.get("Name"): array(a) for a in piece.findall("PointData/DataArray")}
+    return points, cells, data
+
+
 def test_vtk_files_list_every_sphere_and_wall_triangle(tmp_path):
     sim = falling_pair()
 
-    spheres = write_spheres(sim, tmp_path / "spheres.vtk").read_text().splitlines()
-    walls = write_walls(sim, tmp_path / "walls.vtk").read_text().splitlines()
+    points, cells, data = read_polydata(write_spheres(sim, tmp_path / "spheres.vtp"))
+    _, wall_cells, _ = read_polydata(write_walls(sim, tmp_path / "walls.vtp"))
 
-    assert spheres[0] == "# vtk DataFile Version 3.0"
-    assert "POINTS 2 double" in spheres and "VERTICES 2 4" in spheres
-    centre = np.array(spheres[spheres.index("POINTS 2 double") + 1].split(), dtype=float)
-    assert np.allclose(centre, [-0.005, 0, 0.05])
-    assert "POLYGONS 2 8" in walls
+    assert cells == [[0], [1]]
+    assert np.allclose(points[0], [-0.005, 0, 0.05])
+    assert np.allclose(data["radius"], 0.005)
+    assert [len(c) for c in wall_cells] == [3, 3]
 
 
-def read_polydata(path) -> tuple[np.ndarray, list[list[int]], dict[str, list[str]]]:
-    """Points, cells and the raw point-data lines of a legacy ASCII polydata file."""
-    lines = path.read_text().splitlines()
-    start = next(k for k, line in enumerate(lines) if line.startswith("POINTS"))
-    n = int(lines[start].split()[1])
-    points = np.array([line.split() for line in lines[start + 1 : start + 1 + n]], dtype=float)
-    n_cells = int(lines[start + 1 + n].split()[1])
-    cells = [[int(v) for v in line.split()[1:]] for line in lines[start + 2 + n : start + 2 + n + n_cells]]
-    data = {}
-    for k, line in enumerate(lines):
-        if line.startswith(("SCALARS", "VECTORS")):
-            skip = 2 if line.startswith("SCALARS") else 1
-            data[line.split()[1]] = lines[k + skip : k + skip + n]
-    return points, cells, data
+def test_frames_form_a_paraview_time_series_whose_every_file_exists(tmp_path):
+    sim = falling_pair()
+
+    for frame in range(3):
+        write_frame(sim, tmp_path, frame)
+        sim.run(sim.t + 0.01)
+
+    for stream in ("spheres", "polyhedra", "walls"):
+        root = ElementTree.parse(tmp_path / f"{stream}.pvd").getroot()
+        datasets = root.findall("Collection/DataSet")
+        assert root.get("type") == "Collection"
+        assert [d.get("file") for d in datasets] == [f"{stream}_{k:05d}.vtp" for k in range(3)]
+        times = [float(d.get("timestep")) for d in datasets]
+        assert times[0] == 0.0 and np.all(np.diff(times) > 0.009)
+        for dataset in datasets:
+            read_polydata(tmp_path / dataset.get("file"))  # exists and parses
+    heights = [read_polydata(tmp_path / f"spheres_{k:05d}.vtp")[0][0, 2] for k in range(3)]
+    assert heights[0] > heights[1] > heights[2]  # each frame holds its own moment of the fall
 
 
 def test_a_rounded_polyhedron_is_written_as_its_surface_at_its_pose(tmp_path):
@@ -70,10 +99,10 @@ def test_a_rounded_polyhedron_is_written_as_its_surface_at_its_pose(tmp_path):
     pose = from_axis_angle((1.0, 2.0, -0.5), 0.7)
     body = sim.add_body(box, (0.1, -0.05, 0.08), quaternion=pose, velocity=(0.3, 0, -0.1))
 
-    sphere_lines = write_spheres(sim, tmp_path / "spheres.vtk").read_text().splitlines()
-    points, cells, data = read_polydata(write_polyhedra(sim, tmp_path / "polyhedra.vtk"))
+    sphere_points, _, _ = read_polydata(write_spheres(sim, tmp_path / "spheres.vtp"))
+    points, cells, data = read_polydata(write_polyhedra(sim, tmp_path / "polyhedra.vtp"))
 
-    assert "POINTS 2 double" in sphere_lines  # the clump's two spheres; the box is not a sphere
+    assert len(sphere_points) == 2  # the clump's two spheres; the box is not a sphere
     mesh = trimesh.Trimesh(points, np.array(cells), process=False)
     assert mesh.is_watertight and len(cells) > 12
     # Every point lies on the rounded surface: at distance r from the core placed by the pose.
@@ -90,5 +119,5 @@ def test_a_rounded_polyhedron_is_written_as_its_surface_at_its_pose(tmp_path):
     rounding_part = np.pi * r * r * (a + b + c) + 4 / 3 * np.pi * r**3
     steiner = a * b * c + 2 * r * (a * b + b * c + a * c) + rounding_part
     assert steiner - 0.1 * rounding_part < mesh.volume <= steiner
-    assert set(data["body"]) == {str(body)}
-    assert np.allclose(np.array([v.split() for v in data["velocity"]], dtype=float), [0.3, 0, -0.1])
+    assert set(data["body"].tolist()) == {body}
+    assert np.allclose(data["velocity"], [0.3, 0, -0.1])
