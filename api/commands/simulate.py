@@ -93,7 +93,7 @@ def register(app: typer.Typer) -> None:
             None, "--snapshots", help="Write snapshots for `demcal render` (feeder)."
         ),
         vtk: Path | None = typer.Option(
-            None, "--vtk", help="Write VTK XML files and their .pvd time series for ParaView into this folder."
+            None, "--vtk", help="Write VTK XML frames and their .pvd time series (ParaView) here."
         ),
         timeout: float | None = typer.Option(None, "--timeout", min=0, help="Give up after this many s."),
     ) -> None:

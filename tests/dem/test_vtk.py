@@ -53,8 +53,8 @@ def read_polydata(path) -> tuple[np.ndarray, list[list[int]], dict[str, np.ndarr
         if block is None:
             continue
         arrays = {a.get("Name"): array(a) for a in block.findall("DataArray")}
-        starts = np.concatenate([[0], arrays["offsets"]])[:-1].astype(int)
-        cells += [arrays["connectivity"][a:b].tolist() for a, b in zip(starts, arrays["offsets"], strict=True)]
+        bounds = np.concatenate([[0], arrays["offsets"]]).astype(int)
+        cells += [arrays["connectivity"][a:b].tolist() for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
     assert int(piece.get("NumberOfPoints")) == len(points)
     assert int(piece.get("NumberOfVerts")) + int(piece.get("NumberOfPolys")) == len(cells)
     data = {a.get("Name"): array(a) for a in piece.findall("PointData/DataArray")}
