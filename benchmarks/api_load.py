@@ -6,6 +6,10 @@ trial list of a study with 10,000 trials, over loopback, from a uvicorn server i
     python benchmarks/api_load.py --think-ms 1000      # dashboard-like polling, one request/s/client
     python -m benchmarks.api_load --dashboard --think-ms 1000 --results-per-s 2
 
+Besides latencies it prints what the server itself spent in the measured phase (CPU ms and SQL
+statements per request, from the server process: ``accounted_app``), which a busy shared machine
+does not inflate the way it inflates latencies.
+
 Clients run closed-loop by default (each sends its next request as soon as the previous answer
 arrives), which measures the server's capacity; with ``--think-ms`` each client waits between
 requests, which is what 50 open dashboards do. Prints p50/p99 latency per endpoint and req/s.
@@ -91,18 +95,59 @@ def seed_database(url: str) -> tuple[str, str]:
     return study_id, token
 
 
+def accounted_app():
+    """The API app, counting what the server itself spends: SQL statements per request (by the
+    kind of read) and process CPU time, read at ``GET /bench/stats``. Unlike latencies, these do
+    not depend on how busy the shared machine is. A uvicorn factory
+    (``benchmarks.api_load:accounted_app``)."""
+    import contextvars
+    import json
+    import threading
+
+    import sqlalchemy as sa
+
+    from api.app import create_app
+    from api.settings import load_settings
+
+    app = create_app(load_settings())
+    lock = threading.Lock()
+    requests: dict[str, int] = {}
+    queries: dict[str, int] = {}
+    current = contextvars.ContextVar("kind", default="background")  # copied into the thread pool
+
+    def count_query(*args) -> None:
+        with lock:
+            kind = current.get()
+            queries[kind] = queries.get(kind, 0) + 1
+
+    sa.event.listen(sa.Engine, "before_cursor_execute", count_query)
+
+    async def accounted(scope, receive, send):
+        if scope["type"] != "http":
+            await app(scope, receive, send)
+            return
+        if scope["path"] == "/bench/stats":
+            with lock:
+                body = json.dumps({"requests": requests, "queries": queries, "cpu_s": time.process_time()})
+            await send({"type": "http.response.start", "status": 200,
+                        "headers": [(b"content-type", b"application/json")]})
+            await send({"type": "http.response.body", "body": body.encode()})
+            return
+        last = scope["path"].rstrip("/").rsplit("/", 1)[-1]
+        kind = "study" if last.startswith("st-") else last
+        current.set(kind)
+        with lock:
+            requests[kind] = requests.get(kind, 0) + 1
+        await app(scope, receive, send)
+
+    return accounted
+
+
 def serve(url: str, port: int, workers: int) -> subprocess.Popen:
     env = dict(os.environ, DEMCAL_DATABASE_URL=url, DEMCAL_LOG_LEVEL="WARNING")
-    code = (
-        "import uvicorn\n"
-        "from api.app import create_app\n"
-        "from api.settings import load_settings\n"
-        "app = create_app(load_settings())\n"
-    )
-    app_dir = tempfile.mkdtemp(prefix="demcal-bench-app-")
-    Path(app_dir, "bench_app.py").write_text(code)
     return subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "bench_app:app", "--app-dir", app_dir, "--host", "127.0.0.1",
+        [sys.executable, "-m", "uvicorn", "benchmarks.api_load:accounted_app", "--factory",
+         "--app-dir", str(Path(__file__).resolve().parents[1]), "--host", "127.0.0.1",
          "--port", str(port), "--workers", str(workers), "--log-level", "warning", "--no-access-log"],
         env=env,
     )
@@ -233,11 +278,24 @@ async def load(
         await asyncio.gather(*(client_loop(i, client, warm_stop) for i in range(clients)))
         for values in latencies.values():
             values.clear()
+        before = (await client.get("/bench/stats")).json()
         started = time.monotonic()
         stop = started + seconds
         await asyncio.gather(*(client_loop(i, client, stop) for i in range(clients)))
         elapsed = time.monotonic() - started
-    return {"latencies": latencies, "elapsed": elapsed, "errors": errors}
+        after = (await client.get("/bench/stats")).json()
+    return {"latencies": latencies, "elapsed": elapsed, "errors": errors, "server": _spent(before, after)}
+
+
+def _spent(before: dict, after: dict) -> dict:
+    """What the server spent during the measured phase: requests and SQL statements by kind of
+    read (statements of views built in background threads count as "background"), CPU seconds."""
+    def delta(name: str) -> dict[str, int]:
+        return {kind: n - before[name].get(kind, 0) for kind, n in after[name].items()
+                if n - before[name].get(kind, 0)}
+
+    return {"requests": delta("requests"), "queries": delta("queries"),
+            "cpu_s": after["cpu_s"] - before["cpu_s"]}
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -313,6 +371,14 @@ def main() -> None:
             f"p99={_percentile(values, 99) * 1000:7.1f} ms"
         )
     print(f"  throughput {len(everything) / result['elapsed']:.0f} req/s, errors {result['errors']}")
+    server = result["server"]
+    requests = sum(server["requests"].values())
+    per_kind = ", ".join(
+        f"{kind} {server['queries'].get(kind, 0) / n:.1f}" for kind, n in sorted(server["requests"].items()))
+    print(f"  server: {server['cpu_s'] * 1000 / max(requests, 1):.1f} CPU ms per request "
+          f"({server['cpu_s']:.1f} s for {requests}); SQL statements per request: {per_kind}; "
+          f"in background view builds: {server['queries'].get('background', 0)}")
+    print(f"  load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":
