@@ -27,8 +27,8 @@ Pure arithmetic on records; it must not read stores or run anything.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from pymoo.indicators.hv import HV
@@ -85,6 +85,78 @@ def hypervolume(evaluations: Sequence[Evaluation], reference: tuple[float, float
     return float(HV(ref_point=np.ones(2))(inside))
 
 
+class ProgressTracker:
+    """The progress of a study folded in one completed batch at a time, kept between calls.
+
+    An individual's evaluation depends only on its own records (the penalty f2 of a failed one
+    depends on the others, but failed individuals count in no point), so a batch re-evaluates only
+    the individuals it gave results to: N batches cost O(N) evaluations. Evaluating every earlier
+    batch again for each point was quadratic (129 s for 100 batches of 100), and a server keeping
+    a tracker per study folds only the batches completed since its last read.
+    """
+
+    def __init__(self, definition: StudyDefinition) -> None:
+        self.definition = definition
+        self.n_items = definition.n_items()
+        self.next_batch = 0  # batches before it are folded
+        self.reference: tuple[float, float] | None = None
+        self.points: list[ProgressPoint] = []  # best_validated_f1 is None: given at the last point only
+        self._first_batch: int | None = None
+        self._records: dict[int, list[TrialRecord]] = {}  # finished records by individual
+        self._current: dict[int, Evaluation] = {}  # each individual's evaluation on its records so far
+        self._simulations = 0
+        self._failed = 0
+
+    def advance(self, records: Iterable[TrialRecord], completed_batches: int) -> None:
+        """Fold the batches from ``next_batch`` up to ``completed_batches`` (exclusive), given
+        their records (others are ignored; unfinished ones count for nothing)."""
+        by_batch: dict[int, list[TrialRecord]] = {}
+        for record in records:
+            if record.result is not None and self.next_batch <= record.spec.generation < completed_batches:
+                by_batch.setdefault(record.spec.generation, []).append(record)
+        for batch in sorted(by_batch):
+            self._fold(batch, by_batch[batch])
+        self.next_batch = max(self.next_batch, completed_batches)
+
+    def _fold(self, batch: int, records: list[TrialRecord]) -> None:
+        changed = {record.spec.individual for record in records}
+        for record in records:
+            self._records.setdefault(record.spec.individual, []).append(record)
+        for individual in changed:
+            self._current.pop(individual, None)
+        group = [record for individual in sorted(changed) for record in self._records[individual]]
+        self._current.update((ev.individual, ev) for ev in evaluate(group, self.definition, self.n_items))
+        self._simulations += len(records)
+        self._failed += sum(not record.result.ok for record in records)
+        if self._first_batch is None:
+            self._first_batch = batch
+        evaluations = [self._current[individual] for individual in sorted(self._current)]
+        if self.reference is None:
+            self.reference = reference_point(
+                [ev for ev in evaluations if ev.generation == self._first_batch], self.n_items
+            )
+        self.points.append(
+            ProgressPoint(
+                batch=batch,
+                simulations=self._simulations,
+                failed=self._failed,
+                hypervolume=None if self.reference is None else hypervolume(evaluations, self.reference),
+                best_f1=min((ev.f1 for ev in evaluations if ev.ok), default=None),
+                best_validated_f1=None,
+            )
+        )
+
+    def progress(self, validation: Sequence[dict] = ()) -> StudyProgress:
+        """The points so far; ``validation`` (the stored validation table: rows with ``f1`` and
+        ``verdict``, empty before it ran) gives the last point its best validated f1."""
+        points = list(self.points)
+        confirmed = [row["f1"] for row in validation if row.get("verdict") == VALIDATED]
+        confirmed = [f1 for f1 in confirmed if f1 is not None]
+        if points and confirmed:
+            points[-1] = replace(points[-1], best_validated_f1=min(confirmed))
+        return StudyProgress(self.reference, points)
+
+
 def study_progress(
     records: Sequence[TrialRecord],
     definition: StudyDefinition,
@@ -93,29 +165,6 @@ def study_progress(
 ) -> StudyProgress:
     """One point per completed batch (``StudyRecord.generation`` counts them). ``validation`` is
     the stored validation table (rows with ``f1`` and ``verdict``), empty before it ran."""
-    finished = [record for record in records if record.result is not None]
-    batches = sorted(
-        {record.spec.generation for record in finished if record.spec.generation < completed_batches}
-    )
-    n_items = definition.n_items()
-    reference = None
-    points = []
-    for batch in batches:
-        known = [record for record in finished if record.spec.generation <= batch]
-        evaluations = evaluate(known, definition, n_items)
-        if reference is None:
-            reference = reference_point([ev for ev in evaluations if ev.generation == batches[0]], n_items)
-        measured = [ev.f1 for ev in evaluations if ev.ok]
-        last = batch == batches[-1]
-        confirmed = [row["f1"] for row in validation if last and row.get("verdict") == VALIDATED]
-        points.append(
-            ProgressPoint(
-                batch=batch,
-                simulations=len(known),
-                failed=sum(not record.result.ok for record in known),
-                hypervolume=None if reference is None else hypervolume(evaluations, reference),
-                best_f1=min(measured, default=None),
-                best_validated_f1=min((f1 for f1 in confirmed if f1 is not None), default=None),
-            )
-        )
-    return StudyProgress(reference, points)
+    tracker = ProgressTracker(definition)
+    tracker.advance(records, completed_batches)
+    return tracker.progress(validation)

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import pytest
 
+import optimizer.progress
 from optimizer.driver import Driver
 from optimizer.memory import MemoryStore, SyntheticExecutor, synthetic_with_failures
 from optimizer.objectives import Evaluation
-from optimizer.progress import hypervolume, reference_point, study_progress
+from optimizer.progress import ProgressTracker, hypervolume, reference_point, study_progress
+from tests.optimizer.conftest import make_definition
 
 
 def individual(f1: float, f2: float, failure: str = "") -> Evaluation:
@@ -82,3 +84,40 @@ def test_best_validated_f1_is_the_lowest_fresh_f1_of_a_validated_set_at_the_last
     points = study_progress(store.trials(study_id), small_definition, 4, validation).points
 
     assert [p.best_validated_f1 for p in points] == [None, None, None, 0.2]
+
+
+def test_progress_evaluates_each_record_about_once_however_many_batches(monkeypatch):
+    definition = make_definition(
+        ga={"population": 8, "offspring": 4, "generations": 12}, validation={"seeds": 0}
+    )
+    store = MemoryStore()
+    study_id = store.create_study(definition.model_dump(mode="json"))
+    Driver(store, SyntheticExecutor(synthetic_with_failures)).run_to_completion(study_id, poll_timeout=0)
+    records = store.trials(study_id)
+    evaluated = []
+    real = optimizer.progress.evaluate
+
+    def counted(group, *args):
+        evaluated.append(len(group))
+        return real(group, *args)
+
+    monkeypatch.setattr(optimizer.progress, "evaluate", counted)
+
+    points = study_progress(records, definition, 13).points
+
+    assert len(points) == 13
+    # Re-evaluating every earlier batch for each point would be sum(8 + 4 b) = 416 records here.
+    assert sum(evaluated) <= 2 * len(records) == 2 * 56
+
+
+def test_a_tracker_fed_batch_by_batch_gives_the_points_of_one_pass(small_definition):
+    store = MemoryStore()
+    study_id = store.create_study(small_definition.model_dump(mode="json"))
+    Driver(store, SyntheticExecutor(synthetic_with_failures)).run_to_completion(study_id, poll_timeout=0)
+    records = store.trials(study_id)
+    tracker = ProgressTracker(small_definition)
+
+    for completed in (1, 1, 3, 4):  # as a server folds what completed since its previous read
+        tracker.advance([r for r in records if r.spec.generation >= tracker.next_batch], completed)
+
+    assert tracker.progress() == study_progress(records, small_definition, 4)
