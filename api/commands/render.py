@@ -27,24 +27,23 @@ def register(app: typer.Typer) -> None:
     def render(
         snapshot_dir: Path = typer.Argument(..., exists=True, file_okay=False, help="From --snapshots."),
         times: str | None = typer.Option(
-            None, "--times", help="Simulated seconds to draw, e.g. 0,5,30 (default: start, middle, end)."
+            None,
+            "--times",
+            help="Simulated seconds to draw, e.g. 0,5,30 (default: three moments with items in the tray).",
         ),
         out: Path | None = typer.Option(None, "--out", help="PNG to write (default SNAPSHOT_DIR/run.png)."),
         gif: Path | None = typer.Option(None, "--gif", help="Also write an animated GIF here."),
         fps: float = typer.Option(10.0, "--fps", min=0.5, max=50, help="GIF frames per second."),
     ) -> None:
         """Draw the tray and its items (retained ones in red) at chosen times, and a GIF of the run."""
-        from dem.scenarios.render import SnapshotError, load_run, render_gif, render_png
+        from dem.scenarios.render import SnapshotError, default_times, load_run, render_gif, render_png
 
         try:
             run = load_run(snapshot_dir)
         except SnapshotError as exc:
             typer.secho(f"error: {exc}", err=True, fg="red")
             raise typer.Exit(2) from None
-        if times is None:
-            chosen = [run.frames[0].t, run.frames[len(run.frames) // 2].t, run.frames[-1].t]
-        else:
-            chosen = parse_times(times)
+        chosen = default_times(run) if times is None else parse_times(times)
         png = render_png(run, chosen, out or snapshot_dir / "run.png")
         typer.echo(f"wrote {png}")
         if gif is not None:

@@ -308,6 +308,8 @@ class _FeederRun:
                 [item.name for item in self.items],
                 [item.kind for item in self.items],
                 self.hulls,
+                tilt_deg=config.tray.tilt_deg,
+                vibration=(*vib.direction, vib.peak_amplitude, vib.frequency, config.stages.vibration_start),
             )
         self.vtk_dir = Path(vtk_dir) if vtk_dir is not None else None
         self.vtk_frames = 0
@@ -417,7 +419,7 @@ class _FeederRun:
         for i in np.flatnonzero(self.state == 1):
             pos[i] = self.sim.bodies.pos[self.body_of[i]]
             quat[i] = self.sim.bodies.quat[self.body_of[i]]
-        self.writer.frame(self.sim.t, pos, quat, self.state)
+        self.writer.frame(self.sim.t, pos, quat, self.state, self.sim.wall_displacement(0))
 
     @property
     def n_left(self) -> int:

@@ -6,12 +6,17 @@ import pytest
 from PIL import Image
 
 from dem import quaternion
+from dem.result import SimulationStatus
+from dem.scenarios.feeder import FeederConfig, run_feeder
 from dem.scenarios.render import (
     GONE,
     IN_TRAY,
+    KIND_COLOURS,
+    NOT_CREATED,
     RETAINED_COLOUR,
     SnapshotError,
     SnapshotWriter,
+    default_times,
     load_run,
     render_gif,
     render_png,
@@ -70,11 +75,83 @@ def test_png_marks_the_retained_item_in_red(two_item_run):
     assert np.any(np.abs(pixels - red).sum(axis=1) < 60)
 
 
-def test_gif_has_one_image_per_frame(two_item_run):
+def _near(pixels: np.ndarray, colour: str) -> np.ndarray:
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
+    return np.abs(pixels.reshape(-1, 3).astype(int) - rgb).sum(axis=1) < 40
+
+
+def test_gif_has_one_image_per_frame_each_with_the_legend(two_item_run):
     path = render_gif(load_run(two_item_run), two_item_run / "run.gif")
 
     with Image.open(path) as gif:
         assert gif.n_frames == 3
+        for k in range(gif.n_frames):
+            gif.seek(k)
+            pixels = np.asarray(gif.convert("RGB"))
+            legend_band = pixels[int(0.94 * len(pixels)) :]  # below the plots: the legend only
+            assert _near(legend_band, KIND_COLOURS[0]).any() and _near(legend_band, RETAINED_COLOUR).any()
+
+
+def test_default_times_are_moments_with_items_in_the_tray(tmp_path):
+    # Frame 0 before any item is created and a last frame after all have left, as a run that
+    # stops when empty has: neither is a picture of the run.
+    writer = SnapshotWriter(tmp_path, *_tray(), ["a", "b"], ["camera", "camera"], [_box(0.1, 0.06, 0.04)] * 2)
+    states = [(NOT_CREATED, NOT_CREATED), (IN_TRAY, NOT_CREATED), (IN_TRAY, IN_TRAY), (IN_TRAY, IN_TRAY),
+              (GONE, IN_TRAY), (GONE, IN_TRAY), (GONE, GONE)]  # fmt: skip
+    for k, state in enumerate(states):
+        writer.frame(0.5 * k, np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), np.array(state))
+
+    times = default_times(load_run(tmp_path))
+
+    assert times == [1.0, 1.5, 2.5]
+    run = load_run(tmp_path)
+    assert all(np.any(run.frame_at(t).state == IN_TRAY) for t in times)
+
+
+def _tray():
+    tray = build_tray(TrayConfig())
+    return tray.vertices, tray.faces
+
+
+def test_a_feeder_run_records_its_tilt_vibration_and_the_trays_displacement(tmp_path):
+    frequency, amplitude, angle, start = 7.0, 2e-3, 25.0, 0.2
+    config = FeederConfig.model_validate(
+        {
+            "tray": {"tilt_deg": 4.0},
+            "items": {"counts": {"camera": 1}, "spread": 0.0},
+            "stages": {"insertion_time": 0.01, "vibration_start": start, "vibration_time": 0.15},
+            "vibration": {"frequency": frequency, "amplitude": amplitude, "angle_deg": angle},
+            "run": {"snapshot_interval": 0.013},
+        }
+    )  # fmt: skip
+
+    result = run_feeder(config, {"E": 1e6, "mu": 0.5}, seed=0, snapshot_dir=tmp_path)
+
+    assert result.status is SimulationStatus.OK, result.message
+    run = load_run(tmp_path)
+    assert run.tilt_deg == 4.0
+    assert run.vibration.angle_deg == pytest.approx(angle)
+    vibration = run.vibration
+    assert (vibration.amplitude, vibration.frequency, vibration.start) == (amplitude, frequency, start)
+    u = np.array([np.cos(np.radians(angle)), 0.0, np.sin(np.radians(angle))])
+    for frame in run.frames:
+        expected = amplitude * np.sin(2 * np.pi * frequency * max(frame.t - start, 0.0)) * u
+        assert frame.tray_offset == pytest.approx(expected, abs=1e-9)
+    assert max(np.linalg.norm(f.tray_offset) for f in run.frames) > 0.5 * amplitude
+    # Every item's hull is drawn as a closed surface: its triangles cover each hull point.
+    assert set(run.hull_faces[0].ravel()) == set(range(len(run.hulls[0])))
+
+
+def test_snapshots_without_tilt_or_motion_read_as_a_level_still_tray(two_item_run):
+    for path in [two_item_run / "scene.npz", *two_item_run.glob("frame_*.npz")]:
+        with np.load(path) as data:
+            kept = {k: data[k] for k in data.files if k not in ("tilt_deg", "vibration", "tray_offset")}
+        np.savez_compressed(path, **kept)
+
+    run = load_run(two_item_run)
+
+    assert (run.tilt_deg, run.vibration) == (0.0, None)
+    assert all(np.array_equal(f.tray_offset, np.zeros(3)) for f in run.frames)
 
 
 def test_missing_scene_is_an_error_that_says_where_snapshots_come_from(tmp_path):
