@@ -309,7 +309,7 @@ def build_executor(settings: Settings) -> Any:
     from worker.local import LocalPoolExecutor
 
     return LocalPoolExecutor(
-        workers=settings.workers, snapshot_root=settings.data_dir / "snapshots", data_dir=settings.data_dir
+        workers=settings.workers, snapshot_root=settings.snapshot_root, data_dir=settings.data_dir
     )
 
 

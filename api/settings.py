@@ -13,6 +13,8 @@ from typing import Literal
 from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+SNAPSHOT_SUBDIR = "snapshots"  # below data_dir: see Settings.snapshot_root
+
 ENV_PREFIX = "DEMCAL_"
 
 
@@ -90,6 +92,12 @@ class Settings(BaseSettings):
     @property
     def is_sqlite(self) -> bool:
         return self.database_url.startswith("sqlite")
+
+    @property
+    def snapshot_root(self) -> Path:
+        """Where trials keep snapshots, one folder per trial id: workers write there
+        (``keep_snapshots``) and the dashboard's replay reads there."""
+        return self.data_dir / SNAPSHOT_SUBDIR
 
 
 def load_settings(**overrides) -> Settings:

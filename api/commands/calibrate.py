@@ -152,7 +152,7 @@ def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
     from worker.local import LocalPoolExecutor
 
     console = Console()
-    executor = LocalPoolExecutor(workers, snapshot_root=get_settings().data_dir / "snapshots")
+    executor = LocalPoolExecutor(workers, snapshot_root=get_settings().snapshot_root)
     driver = Driver(store, executor)
     renewed = time.monotonic()
 

@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
                 name=name,
                 heartbeat_s=heartbeat,
                 log_level=settings.log_level,
-                snapshot_root=settings.data_dir / "snapshots",
+                snapshot_root=settings.snapshot_root,
                 data_dir=settings.data_dir,
             )
         except WorkerSetupError as exc:

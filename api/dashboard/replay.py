@@ -1,7 +1,7 @@
 """A trial's snapshots as compact JSON for the dashboard's replay:
 ``GET /api/v1/studies/{study_id}/trials/{trial_id}/replay``.
 
-Where snapshots live: ``<DEMCAL_DATA_DIR>/snapshots/<trial_id>/``, a directory in the format
+Where snapshots live: ``Settings.snapshot_root / <trial_id>``, a directory in the format
 ``dem/scenarios/render.py`` documents (``scene.npz``, ``frame_NNNNNN.npz``, ``summary.json``),
 written by whatever ran the trial with snapshots on. A trial without that directory answers 404
 with a message saying so; the page then shows the discharge curve only.
@@ -27,17 +27,12 @@ from fastapi.responses import JSONResponse
 
 from api.deps import ApiKeyDep, SettingsDep, StoreDep
 from api.errors import NotFoundError
+from api.settings import SNAPSHOT_SUBDIR
 
-SNAPSHOT_SUBDIR = "snapshots"
 POSITION_DECIMALS = 4  # metres: 0.1 mm, far below an item's size
 QUATERNION_DECIMALS = 4
 
 router = APIRouter(prefix="/api/v1/studies/{study_id}/trials", tags=["trials"])
-
-
-def snapshot_dir(data_dir: Path, trial_id: str) -> Path:
-    """Where the snapshots of ``trial_id`` are kept; the one place this convention is written."""
-    return Path(data_dir) / SNAPSHOT_SUBDIR / trial_id
 
 
 def replay_document(directory: Path, max_frames: int) -> dict[str, Any]:
@@ -83,7 +78,7 @@ def trial_replay(
 
     store.get_study(study_id, principal.visible_to)
     row = store.get_trial(study_id, trial_id)
-    directory = snapshot_dir(settings.data_dir, row.id)
+    directory = settings.snapshot_root / row.id
     try:
         document = replay_document(directory, max_frames)
     except SnapshotError as exc:

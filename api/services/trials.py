@@ -52,11 +52,6 @@ def response_column(response) -> str:
     return response.name if response.unit == "1" else f"{response.name} [{response.unit}]"
 
 
-def csv_columns(responses) -> tuple[str, ...]:
-    at = CSV_COLUMNS.index("status") + 1
-    return (*CSV_COLUMNS[:at], *(response_column(r) for r in responses), *CSV_COLUMNS[at:])
-
-
 def _objectives(row) -> tuple[float | None, float | None]:
     f1 = decode_value(row.f1_value, row.f1_kind)
     f2 = decode_value(row.f2_value, row.f2_kind)

@@ -9,7 +9,9 @@ definition is: ``api/services/``), or know about HTTP.
 
 One module per resource, mixed into ``SqlStore``: ``studies``, ``trials`` (the driver's writes),
 ``simulations``, ``shapes`` and ``reads`` (trial pages, summaries and counters for the API and
-dashboard); ``base`` holds the session and the row conversions they share.
+dashboard); ``base`` holds the session and the row conversions they share. ``leases`` (which
+process drives a study: ``DatabaseLeases``) stands apart, used by ``serve``'s driver loop and
+``calibrate``.
 """
 
 from __future__ import annotations
