@@ -6,10 +6,12 @@ Where snapshots live: ``Settings.snapshot_root / <trial_id>``, a directory in th
 written by whatever ran the trial with snapshots on. A trial without that directory answers 404
 with a message saying so; the page then shows the discharge curve only.
 
-The JSON sends each item's convex hull once (body frame) and, per frame, only positions,
-quaternions and states, rounded to 0.1 mm and 1e-4; the browser rotates and projects the hulls.
-That is about 8 numbers per item and frame instead of a polygon, so a 650-frame run of 30 items
-is a few hundred kB. At most ``max_frames`` evenly spaced frames are sent (the last always).
+The JSON sends the tray (vertices at rest, triangles, tilt, vibration) and each item's convex
+hull once (body-frame points and their triangles), and per frame only positions, quaternions,
+states and the tray's displacement, rounded to 0.1 mm (the displacement to 10 um) and 1e-4; the
+browser places the hulls, for the top view and the 3D view alike. That is about 8 numbers per
+item and frame instead of a polygon, so a 650-frame run of 30 items is a few hundred kB. At most
+``max_frames`` evenly spaced frames are sent (the last always).
 
 It reads files only: it never runs or changes a simulation, and it serves nothing before the API
 key has been checked against the trial's study (the same rule as every other trial endpoint).
@@ -30,6 +32,7 @@ from api.errors import NotFoundError
 from api.settings import SNAPSHOT_SUBDIR
 
 POSITION_DECIMALS = 4  # metres: 0.1 mm, far below an item's size
+OFFSET_DECIMALS = 5  # metres: 10 um, well below the tray's vibration amplitude (mm)
 QUATERNION_DECIMALS = 4
 
 router = APIRouter(prefix="/api/v1/studies/{study_id}/trials", tags=["trials"])
@@ -47,11 +50,28 @@ def replay_document(directory: Path, max_frames: int) -> dict[str, Any]:
     if frames[-1] is not run.frames[-1]:
         frames.append(run.frames[-1])
     vertices = np.round(run.tray_vertices, POSITION_DECIMALS)
+    vibration = run.vibration
     return {
-        "tray": {"vertices": vertices.tolist(), "faces": run.tray_faces.tolist()},
+        "tray": {
+            "vertices": vertices.tolist(),
+            "faces": run.tray_faces.tolist(),
+            "tilt_deg": run.tilt_deg,
+            "vibration": None if vibration is None else {
+                "direction": list(vibration.direction),
+                "angle_deg": round(vibration.angle_deg, 3),
+                "amplitude": vibration.amplitude,
+                "frequency": vibration.frequency,
+                "start": vibration.start,
+            },
+        },
         "items": [
-            {"name": name, "kind": kind, "hull": np.round(hull, POSITION_DECIMALS).tolist()}
-            for name, kind, hull in zip(run.names, run.kinds, run.hulls, strict=True)
+            {
+                "name": name,
+                "kind": kind,
+                "hull": np.round(hull, POSITION_DECIMALS).tolist(),
+                "faces": faces.tolist(),
+            }
+            for name, kind, hull, faces in zip(run.names, run.kinds, run.hulls, run.hull_faces, strict=True)
         ],
         "retained": run.retained.tolist(),
         "frames": {
@@ -59,6 +79,7 @@ def replay_document(directory: Path, max_frames: int) -> dict[str, Any]:
             "pos": [np.round(frame.pos, POSITION_DECIMALS).tolist() for frame in frames],
             "quat": [np.round(frame.quat, QUATERNION_DECIMALS).tolist() for frame in frames],
             "state": [frame.state.astype(int).tolist() for frame in frames],
+            "tray_offset": [np.round(frame.tray_offset, OFFSET_DECIMALS).tolist() for frame in frames],
         },
         "frames_total": len(run.frames),
     }
@@ -73,7 +94,7 @@ def trial_replay(
     settings: SettingsDep,
     max_frames: Annotated[int, Query(ge=2, le=5000, description="Most frames to send.")] = 400,
 ) -> JSONResponse:
-    """The trial's snapshot frames (top-view replay); 404 when the trial kept none."""
+    """The trial's snapshot frames (top-view and 3D replay); 404 when the trial kept none."""
     from dem.scenarios.render import SnapshotError
 
     store.get_study(study_id, principal.visible_to)

@@ -206,19 +206,27 @@ def _failure(spec: TrialSpec) -> dict | None:
     return None
 
 
-def snapshot_run(directory: Path, n_items: int, retained: list[bool], frames: int = 60) -> None:
-    """A replayable snapshot directory: boxes moving along the tray, retained ones stopping."""
-    from dem.scenarios.render import SnapshotWriter
-    from dem.scenarios.tray import TrayConfig, parametric_tray_mesh
+REPLAY_TILT_DEG = 3.0
+REPLAY_VIBRATION = (np.cos(np.radians(25)), 0.0, np.sin(np.radians(25)), 1.5e-3, 60.0, 5.0)
 
-    tray = TrayConfig()
-    vertices, faces = parametric_tray_mesh(tray)
+
+def snapshot_run(directory: Path, n_items: int, retained: list[bool], frames: int = 60) -> None:
+    """A replayable snapshot directory: boxes moving along a tilted tray that vibrates from 5 s,
+    retained ones stopping."""
+    from dem.scenarios.render import SnapshotWriter
+    from dem.scenarios.tray import TrayConfig, build_tray
+
+    tray = TrayConfig(tilt_deg=REPLAY_TILT_DEG)
+    geometry = build_tray(tray)
+    vertices, faces = geometry.vertices, geometry.faces
+    *direction, amplitude, frequency, start_time = REPLAY_VIBRATION
     rng = np.random.default_rng(3)
     half = np.array([0.073, 0.035, 0.005])
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
     hulls = [corners * half * rng.uniform(0.8, 1.1) for _ in range(n_items)]
     writer = SnapshotWriter(
-        directory, vertices, faces, [f"item{i}" for i in range(n_items)], ["smartphone"] * n_items, hulls
+        directory, vertices, faces, [f"item{i}" for i in range(n_items)], ["smartphone"] * n_items, hulls,
+        tilt_deg=REPLAY_TILT_DEG, vibration=REPLAY_VIBRATION,
     )
     start = np.column_stack(
         [
@@ -238,7 +246,8 @@ def snapshot_run(directory: Path, n_items: int, retained: list[bool], frames: in
         pos = np.column_stack([x, y, start[:, 2]])
         quat = np.column_stack([np.cos(yaw / 2), np.zeros(n_items), np.zeros(n_items), np.sin(yaw / 2)])
         state = np.where(x > tray.length + 0.05, 2, 1)
-        writer.frame(t, pos, quat, state)
+        phase = 2 * np.pi * frequency * max(t - start_time, 0.0)
+        writer.frame(t, pos, quat, state, amplitude * np.sin(phase) * np.array(direction))
     times = [None if keep else 30.0 for keep in retained]
     writer.summary({"discharge_times": times})
 

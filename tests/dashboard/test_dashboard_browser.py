@@ -227,6 +227,70 @@ def test_trial_page_shows_the_discharge_curve_and_replays_the_snapshots(page, da
     save_screenshot(page, "dashboard-replay")
 
 
+REPLAY_3D = """() => document.getElementById('replay-3d').data.map((t) => ({
+  type: t.type, x: Array.from(t.x), y: Array.from(t.y), z: Array.from(t.z),
+  faces: t.i ? t.i.length : 0, facecolor: t.facecolor ? Array.from(t.facecolor) : null,
+  direction: t.u ? [t.u[0], t.v[0], t.w[0]] : null,
+}))"""
+
+
+def replay_document(page, dashboard) -> dict:
+    study, trial = dashboard.study.study_id, dashboard.study.replay_trial_id
+    return page.evaluate(
+        """async ([study, trial]) => (await fetch(`/api/v1/studies/${study}/trials/${trial}/replay`,
+             {headers: {Authorization: `Bearer ${localStorage.getItem('demcal.apiKey')}`}})).json()""",
+        [study, trial],
+    )
+
+
+def show_frame(page, index: int) -> None:
+    page.evaluate(
+        "(i) => { const s = document.getElementById('replay-frame'); s.value = String(i);"
+        " s.dispatchEvent(new Event('input')); }",
+        index,
+    )
+    page.wait_for_function("(i) => document.getElementById('replay-3d').dataset.frame === String(i)",
+                           arg=index)
+
+
+def test_replay_in_3d_draws_the_tilted_moving_tray_and_each_item_as_its_shape(page, dashboard):
+    page.goto(dashboard.url(f"/trials/{dashboard.study.replay_trial_id}"))
+    page.wait_for_selector("#trial[data-loaded='1']")
+    page.wait_for_function("() => document.getElementById('replay-3d').data?.length >= 2")
+    doc = replay_document(page, dashboard)
+    frames = doc["frames"]
+
+    last = len(frames["t"]) - 1
+    moved = max(range(last + 1), key=lambda k: abs(frames["tray_offset"][k][2]))
+    traces = {}
+    for index in (last, moved, 0):
+        show_frame(page, index)
+        traces[index] = page.evaluate(REPLAY_3D)
+    save_screenshot(page, "dashboard-replay-3d")
+    motion = page.locator("#replay-motion").inner_text()
+
+    for index, (tray, items, *arrow) in traces.items():
+        offset = frames["tray_offset"][index]
+        # The tray is its triangles, tilted as stored, moved by that frame's displacement.
+        for axis, values in enumerate((tray["x"], tray["y"], tray["z"])):
+            expected = [v[axis] + offset[axis] for v in doc["tray"]["vertices"]]
+            assert values == pytest.approx(expected, abs=1e-9)
+        assert tray["faces"] == len(doc["tray"]["faces"])
+        # Each item in the tray is its hull: all its points and all its triangles.
+        in_tray = [n for n, state in enumerate(frames["state"][index]) if state == 1]
+        assert len(items["x"]) == sum(len(doc["items"][n]["hull"]) for n in in_tray)
+        assert items["faces"] == sum(len(doc["items"][n]["faces"]) for n in in_tray)
+        assert arrow[-1]["direction"] == pytest.approx(doc["tray"]["vibration"]["direction"])
+    assert traces[0][0]["z"] != pytest.approx(traces[moved][0]["z"], abs=1e-4)  # the tray vibrates
+    assert len(traces[0][1]["x"]) > len(traces[last][1]["x"]) > 0  # items left, some stayed
+    assert set(traces[last][1]["facecolor"]) == {"#e69f00"}  # the ones left are the retained ones
+    # The tilt lowers the outlet end: its floor is below the back's.
+    floor = [(x, z) for x, z in zip(traces[0][0]["x"], traces[0][0]["z"], strict=True)]
+    assert min(z for x, z in floor if x > 0.55) < min(z for x, z in floor if x < 0.05) - 0.02
+    assert "tray tilt 3 deg" in motion and "25 deg from the horizontal" in motion and "60 Hz" in motion
+    assert page.errors == []
+
+
 # Pixels of the replay canvas below its legend, classified as the retained colour (Okabe-Ito
 # orange #e69f00) or the discharged one (sky blue #56b4e9), both drawn at 90 % opacity over the
 # tray or the background, so matched by hue range rather than exactly.
@@ -243,10 +307,13 @@ COUNT_COLOURS = """() => {
 }"""
 
 
+REPLAY_ROUTE = re.compile(r"/trials/[^/]+/replay(\?|$)")  # the API's replay, not replay3d.js
+
+
 def replay_colours(page, dashboard, frame: str, retained=None) -> dict[str, int]:
     """Orange and blue pixels of the replay at ``frame`` ("first" or "last"), optionally with the
     API's retained flags replaced (every item retained, or none)."""
-    page.unroute("**/replay*")
+    page.unroute(REPLAY_ROUTE)
     if retained is not None:
         def rewrite(route):
             response = route.fetch()
@@ -254,7 +321,7 @@ def replay_colours(page, dashboard, frame: str, retained=None) -> dict[str, int]
             doc["retained"] = [retained] * len(doc["retained"])
             route.fulfill(response=response, json=doc)
 
-        page.route("**/replay*", rewrite)
+        page.route(REPLAY_ROUTE, rewrite)
     page.goto(dashboard.url(f"/trials/{dashboard.study.replay_trial_id}"))
     page.wait_for_selector("#trial[data-loaded='1']")
     if frame == "first":

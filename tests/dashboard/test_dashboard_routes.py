@@ -97,6 +97,37 @@ def test_replay_sends_hulls_once_and_frames_compactly(http, dashboard):
     assert len(body["frames"]["pos"][0]) == len(RETAINED_IN_REPLAY)
 
 
+def test_replay_sends_the_tilted_tray_its_vibration_and_every_item_as_a_closed_hull(http, dashboard):
+    from collections import Counter
+
+    import numpy as np
+
+    from dem.scenarios.tray import TrayConfig, build_tray
+    from tests.dashboard.seed import REPLAY_TILT_DEG, REPLAY_VIBRATION
+
+    study, trial = dashboard.study.study_id, dashboard.study.replay_trial_id
+
+    body = http.get(f"/api/v1/studies/{study}/trials/{trial}/replay", headers=auth(dashboard)).json()
+
+    tray = build_tray(TrayConfig(tilt_deg=REPLAY_TILT_DEG))
+    assert np.allclose(body["tray"]["vertices"], tray.vertices, atol=1e-4)
+    assert body["tray"]["faces"] == tray.faces.tolist()
+    assert body["tray"]["tilt_deg"] == REPLAY_TILT_DEG
+    vibration = body["tray"]["vibration"]
+    assert vibration["direction"] == pytest.approx(REPLAY_VIBRATION[:3])
+    assert vibration["angle_deg"] == pytest.approx(25.0)
+    assert (vibration["amplitude"], vibration["frequency"], vibration["start"]) == REPLAY_VIBRATION[3:]
+    offsets = np.array(body["frames"]["tray_offset"])
+    assert offsets.shape == (len(body["frames"]["t"]), 3)
+    assert 0 < np.abs(offsets).max() <= REPLAY_VIBRATION[3] + 1e-5
+    for item in body["items"]:
+        # Each item's shape is a closed surface over its hull points: every edge has two faces.
+        faces = np.array(item["faces"])
+        edges = Counter(tuple(sorted(e)) for f in faces for e in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])))
+        assert set(faces.ravel()) == set(range(len(item["hull"])))
+        assert set(edges.values()) == {2}
+
+
 def test_replay_needs_a_key_of_the_owner(http, dashboard):
     study, trial = dashboard.study.study_id, dashboard.study.replay_trial_id
 

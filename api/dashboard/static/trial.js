@@ -1,13 +1,14 @@
 // The trial page: parameters, seed, status and timings, every response the scenario declares
 // with its unit; the discharge curve (items remaining against simulated time, from the result's
-// discharge_times, when the scenario records one); and, when the trial kept snapshots, a
-// top-view replay on a canvas with the items retained at the end marked.
+// discharge_times, when the scenario records one); and, when the trial kept snapshots, a replay
+// in 3D (replay3d.js) beside a top view on a canvas, with the items retained at the end marked.
 
 import {
   ApiError, PARAMETERS, api, apiKey, el, experimentResponses, fmt, fmtSeconds, fmtTime, measuredValue,
   plotlyReady, poll, responseHtml, responseText, showBanner, statusBadge, withUnit,
 } from "./api.js";
 import { CONFIG, baseLayout } from "./plots.js";
+import { draw3d, motionText } from "./replay3d.js";
 
 const section = document.getElementById("trial");
 const trialId = section.dataset.trialId;
@@ -228,6 +229,7 @@ async function replay() {
     throw error;
   }
   const player = new Replay(doc, document.getElementById("replay"));
+  const box3d = document.getElementById("replay-3d");
   const slider = document.getElementById("replay-frame");
   const button = document.getElementById("replay-play");
   const label = document.getElementById("replay-time");
@@ -236,8 +238,13 @@ async function replay() {
   slider.value = String(count - 1);
   slider.disabled = false;
   button.disabled = false;
+  document.getElementById("replay-motion").textContent = motionText(doc);
+  await plotlyReady();
+  const colours = { retained: RETAINED, discharged: DISCHARGED };
   const show = (i) => {
     player.draw(i);
+    box3d.dataset.frame = String(i);
+    draw3d(box3d, doc, i, colours);
     label.textContent = `frame ${i + 1} of ${count} (t = ${doc.frames.t[i].toFixed(2)} s)`;
   };
   show(count - 1);
