@@ -10,9 +10,14 @@ server process keeps its own cache; they agree because the version comes from th
 A view is built once per version, whatever the number of requests asking for it meanwhile
 (single flight): 50 dashboards polling a study whose identifiability takes seconds to compute
 would otherwise compute it 50 times at once and starve every other request. A view that may lag
-one version (``stale_ok``: progress and identifiability, which change once per batch) is served
-from its previous version while the new one is built in the background, so a poll never waits
-for a build it could do without.
+(``stale_ok``: progress and identifiability, which change once per batch) is served from its
+previous version while the new one is built in the background, so a poll never waits for a build
+it could do without; and only one such build per view and study runs at a time: versions that
+come faster than a build ends would otherwise each start one, and the builds would pile up until
+they took every core (the next poll after a build ends starts the one for the latest version).
+
+A view may also keep an object between its builds (``kept``): progress folds only the batches
+completed since its previous build.
 
 What it must not do: decide what a view contains (``api/services/trials.py`` does).
 """
@@ -24,6 +29,9 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from concurrent.futures import Future
+from typing import TypeVar
+
+T = TypeVar("T")
 
 log = logging.getLogger(__name__)
 
@@ -31,10 +39,13 @@ log = logging.getLogger(__name__)
 class StudyViewCache:
     """Serialised views by (view, study id), each valid for one version; least recently used out."""
 
-    def __init__(self, max_entries: int = 512) -> None:
+    def __init__(self, max_entries: int = 512, max_kept: int = 32) -> None:
         self.max_entries = max_entries
+        self.max_kept = max_kept  # kept objects may be large (progress keeps a study's records)
         self._entries: OrderedDict[tuple[str, str], tuple[Hashable, bytes]] = OrderedDict()
         self._building: dict[tuple[str, str, Hashable], Future] = {}
+        self._refreshing: set[tuple[str, str]] = set()  # (view, study id) built in the background
+        self._kept: OrderedDict[tuple[str, str], object] = OrderedDict()
         self._lock = threading.Lock()
 
     def get_or_build(
@@ -46,40 +57,69 @@ class StudyViewCache:
             if entry is not None and entry[0] == version:
                 self._entries.move_to_end(key)
                 return entry[1]
-            pending = self._building.get((*key, version))
-            mine = pending is None
-            if mine:
-                pending = self._building[(*key, version)] = Future()
-        stale = entry[1] if stale_ok and entry is not None else None
-        if stale is not None:
-            if mine:
+            if stale_ok and entry is not None:
+                refresh = key not in self._refreshing
+                self._refreshing.add(key)
+            else:
+                pending = self._building.get((*key, version))
+                mine = pending is None
+                if mine:
+                    pending = self._building[(*key, version)] = Future()
+        if stale_ok and entry is not None:
+            if refresh:
                 threading.Thread(
-                    target=self._build, args=(key, version, build, pending, True), name=f"view-{view}",
-                    daemon=True,
+                    target=self._refresh, args=(key, version, build), name=f"view-{view}", daemon=True
                 ).start()
-            return stale
+            return entry[1]
         if mine:
             self._build(key, version, build, pending)
         return pending.result()
 
+    def kept(self, view: str, study_id: str, make: Callable[[], T]) -> T:
+        """The object ``view`` keeps for ``study_id`` between builds (made on first use); past
+        ``max_kept`` the least recently used is forgotten (its next build starts afresh). Builds
+        of one view and study may overlap (two versions asked for before either is cached): the
+        object must lock itself."""
+        key = (view, study_id)
+        with self._lock:
+            if key not in self._kept:
+                self._kept[key] = make()
+                while len(self._kept) > self.max_kept:
+                    self._kept.popitem(last=False)
+            self._kept.move_to_end(key)
+            return self._kept[key]
+
     def _build(
-        self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes], done: Future,
-        background: bool = False,
+        self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes], done: Future
     ) -> None:
         """Build outside the lock; store it; hand it (or the error) to every request waiting for it."""
         try:
             body = build()
         except BaseException as exc:
-            if background:  # no request receives the error: the stale view stays, the next poll retries
-                log.exception("building view %s of study %s failed", *key)
             done.set_exception(exc)
             with self._lock:
                 self._building.pop((*key, version), None)
             return
         with self._lock:
-            self._entries[key] = (version, body)
-            self._entries.move_to_end(key)
-            while len(self._entries) > self.max_entries:
-                self._entries.popitem(last=False)
+            self._store(key, version, body)
             self._building.pop((*key, version), None)
         done.set_result(body)
+
+    def _refresh(self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes]) -> None:
+        """Build in the background; no request waits: an error is logged, the stale view stays and
+        the next poll tries again."""
+        try:
+            body = build()
+        except Exception:
+            log.exception("building view %s of study %s failed", *key)
+            body = None
+        with self._lock:
+            if body is not None:
+                self._store(key, version, body)
+            self._refreshing.discard(key)
+
+    def _store(self, key: tuple[str, str], version: Hashable, body: bytes) -> None:
+        self._entries[key] = (version, body)
+        self._entries.move_to_end(key)
+        while len(self._entries) > self.max_entries:
+            self._entries.popitem(last=False)

@@ -70,3 +70,25 @@ def test_a_failed_build_is_raised_to_its_requests_and_tried_again_by_the_next():
         raise AssertionError("the build's error was swallowed")
 
     assert views.get_or_build("pareto", "s1", 1, flaky) == b"v1"
+
+
+def test_a_view_that_may_lag_builds_one_version_at_a_time_however_many_pass():
+    views, release, builds = StudyViewCache(), threading.Event(), []
+    views.get_or_build("progress", "s1", 1, lambda: b"v1", stale_ok=True)
+
+    def slow(version: int):
+        def build() -> bytes:
+            builds.append(version)
+            release.wait(10)
+            return f"v{version}".encode()
+        return build
+
+    during = [views.get_or_build("progress", "s1", v, slow(v), stale_ok=True) for v in (2, 3, 4, 5)]
+    release.set()
+    deadline = time.monotonic() + 10
+    while views.get_or_build("progress", "s1", 5, slow(5), stale_ok=True) != b"v5":
+        assert time.monotonic() < deadline, "the latest version was never built"
+        time.sleep(0.01)
+
+    assert during == [b"v1"] * 4
+    assert builds == [2, 5]  # versions 3 and 4 passed while 2 was building: never built
