@@ -4,11 +4,15 @@ which parameters its experiment pins down, as clients read them.
 Both are computed by the optimiser's own functions (``optimizer/progress.py``,
 ``optimizer/identifiability.py``) from the stored trials, the same way ``summary.json`` is, and
 kept as JSON per study version (``api/services/views.py``): they change once per batch, while a
-dashboard polls every few seconds. It reads only, and checks first that the caller may see the
+dashboard polls every few seconds. Progress also keeps its tracker per study between versions and
+reads only the batches completed since (a study of 100 batches is not read and evaluated again
+whole after each one). It reads only, and checks first that the caller may see the
 study (404 otherwise).
 """
 
 from __future__ import annotations
+
+import threading
 
 from api.auth import Principal
 from api.schemas import IdentifiabilityRead, StudyProgressRead
@@ -16,9 +20,18 @@ from api.services.views import StudyViewCache
 from api.store import SqlStore
 from optimizer.identifiability import study_identifiability
 from optimizer.objectives import evaluate
-from optimizer.progress import study_progress
+from optimizer.progress import ProgressTracker
 from optimizer.space import ParameterSpace
 from optimizer.study import StudyDefinition
+
+
+class _Folded:
+    """A study's progress tracker, kept between builds of its view: a point never changes once
+    given, so each build reads and folds only the batches completed since the previous one."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.tracker: ProgressTracker | None = None
 
 
 def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal) -> bytes:
@@ -26,9 +39,16 @@ def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, princip
 
     def build() -> bytes:
         record = store.load_study(study_id)
-        definition = StudyDefinition.model_validate(record.definition)
         validation = (record.recommendation or {}).get("validation", [])
-        progress = study_progress(store.trials(study_id), definition, record.generation, validation)
+        folded = views.kept("progress", study_id, _Folded)
+        with folded.lock:
+            if folded.tracker is None:
+                folded.tracker = ProgressTracker(StudyDefinition.model_validate(record.definition))
+            tracker = folded.tracker
+            if tracker.next_batch < record.generation:
+                tracker.advance(store.batch_trials(study_id, tracker.next_batch, record.generation),
+                                record.generation)
+            progress = tracker.progress(validation)
         return StudyProgressRead(study_id=study_id, **progress.as_json()).model_dump_json().encode()
 
     version = (study.updated_at, study.generation)

@@ -61,6 +61,13 @@ class TrialStore(StoreBase):
         with self.session() as s:
             return [trial_record(row) for row in s.scalars(query)]
 
+    def batch_trials(self, study_id: str, first: int, end: int) -> list[TrialRecord]:
+        """The trials of batches ``first`` to ``end`` (exclusive): what a progress view that kept
+        the earlier batches still needs."""
+        query = _records(study_id).where(TrialRow.generation >= first, TrialRow.generation < end)
+        with self.session() as s:
+            return [trial_record(row) for row in s.scalars(query)]
+
     def changed_trials(
         self, study_id: str, since: datetime | None = None
     ) -> tuple[list[TrialRecord], datetime | None]:

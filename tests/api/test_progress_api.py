@@ -3,8 +3,11 @@ the study's summary.json, only for the study's owner."""
 
 from __future__ import annotations
 
+import time
+
 from optimizer.driver import Driver
 from optimizer.memory import SyntheticExecutor, synthetic_with_failures
+from optimizer.progress import study_progress
 from optimizer.report import build_summary
 from optimizer.study import StudyDefinition
 from tests.api.conftest import study_definition
@@ -30,3 +33,48 @@ def test_progress_and_identifiability_match_the_summary_and_are_private(client, 
     assert {k: v for k, v in identified.items() if k != "study_id"} == summary["identifiability"]
     assert [entry["name"] for entry in identified["parameters"]] == ["E", "nu", "e", "mu"]
     assert hidden.status_code == 404
+
+
+
+def _progress_once_built(client, url: str, auth: dict, expected: list[dict]) -> list[dict]:
+    """Poll until the view shows ``expected``: it is served one version stale while it builds."""
+    deadline = time.monotonic() + 60
+    while (points := client.get(url, headers=auth).json()["points"]) != expected:
+        assert time.monotonic() < deadline, f"progress stayed at {points}, expected {expected}"
+        time.sleep(0.02)
+    return points
+
+
+def test_progress_polled_during_a_run_reads_each_batch_once_and_agrees_with_one_pass(
+    client, keys, store, monkeypatch
+):
+    from api.store import SqlStore
+
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 8, "offspring": 4, "generations": 4}, seed=7)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="alice")
+    driver = Driver(store, SyntheticExecutor(synthetic_with_failures))
+    read = []
+    batch_trials = SqlStore.batch_trials
+
+    def counted(self, *args):
+        records = batch_trials(self, *args)
+        read.extend(record.spec.trial_id for record in records)
+        return records
+
+    monkeypatch.setattr(SqlStore, "batch_trials", counted)
+    url = f"/api/v1/studies/{study_id}/progress"
+
+    shown = []
+    active = True
+    while active:
+        active = driver.step(study_id, timeout=0).active
+        record = store.load_study(study_id)
+        validation = (record.recommendation or {}).get("validation", [])
+        expected = study_progress(store.trials(study_id), definition, record.generation, validation)
+        shown.append(_progress_once_built(client, url, keys.auth(), expected.as_json()["points"]))
+
+    assert len({len(points) for points in shown}) > 3  # it was polled after most batches
+    completed = [t.spec.trial_id for t in store.trials(study_id) if t.spec.generation < record.generation]
+    assert sorted(read) == sorted(completed)  # each completed batch read once, however many polls
