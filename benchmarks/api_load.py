@@ -53,7 +53,7 @@ def seed_database(url: str) -> tuple[str, str]:
 
     from api.auth import create_key
     from api.db import create_db_engine, upgrade_database
-    from api.models import TrialRow, encode_value, utcnow
+    from api.models import StudyRow, TrialRow, encode_value, utcnow
     from api.store import SqlStore
     from optimizer.protocols import trial_id
     from optimizer.study import StudyDefinition
@@ -63,7 +63,7 @@ def seed_database(url: str) -> tuple[str, str]:
     store = SqlStore(engine)
     definition = StudyDefinition.model_validate(
         {"scenario": {}, "experiment": {"measured": [3, 4, 4, 2, 5]},
-         "ga": {"population": 100, "offspring": 100, "generations": 99}}
+         "ga": {"population": 100, "offspring": 100, "generations": 999}}
     )
     study_id = store.create_study(definition.model_dump(mode="json"), owner="bench")
     rng = random.Random(1)
@@ -85,11 +85,14 @@ def seed_database(url: str) -> tuple[str, str]:
                 "pareto": i < PARETO_SIZE, "f1_value": f1_value, "f1_kind": f1_kind,
                 "f2_value": f2_value, "f2_kind": f2_kind, "created_at": now, "updated_at": now,
                 "finished_at": now,
-                "result": {"status": "ok", "n_remaining": n_remaining, "wall_time_s": wall},
+                "result": {"status": "ok", "n_items": 30, "n_remaining": n_remaining, "wall_time_s": wall,
+                           "cost": wall * 1e6},
             }
         )
     with store.session() as session:
         session.execute(sa.insert(TrialRow), rows)
+        # The N_TRIALS // 100 batches are complete, as the driver would have recorded them.
+        session.execute(sa.update(StudyRow).where(StudyRow.id == study_id).values(generation=N_TRIALS // 100))
         _, token = create_key(session, "bench")
     engine.dispose()
     return study_id, token
@@ -169,8 +172,9 @@ async def wait_ready(base: str, timeout: float = 60.0) -> None:
 
 
 def write_results(url: str, study_id: str, per_s: float, stop: float, batch: int = 20) -> None:
-    """Stand-in for running workers, written as the driver writes: a batch of trials queued at
-    once (a new version of the study's views), then run and finished, ``per_s`` a second."""
+    """Stand-in for running workers and the driver, written as they write: a batch of trials queued
+    at once, then run and finished, ``per_s`` a second, then the batch's objectives and the Pareto
+    ranking saved (``save_generation``), so that every batch versions the study's views."""
     from api.db import create_db_engine
     from api.store import SqlStore
     from dem.result import SimulationResult, SimulationStatus
@@ -178,24 +182,32 @@ def write_results(url: str, study_id: str, per_s: float, stop: float, batch: int
 
     store = SqlStore(create_db_engine(url))
     rng = random.Random(2)
+    pareto = [trial_id(study_id, i, 0) for i in range(PARETO_SIZE)]
+    generation = store.load_study(study_id).generation
     individual = N_TRIALS
     while time.time() < stop:
         specs = [
-            TrialSpec(trial_id(study_id, i, 0), study_id, i, i // 100, 0, i,
+            TrialSpec(trial_id(study_id, i, 0), study_id, i, generation, 0, i,
                       {"E": 10 ** rng.uniform(5, 9), "nu": 0.3, "e": 0.5, "mu": rng.uniform(0.05, 1)}, {})
             for i in range(individual, individual + batch)
         ]
         individual += batch
         store.add_trials(specs)
         store.mark_queued([spec.trial_id for spec in specs])
+        objectives = {}
         for spec in specs:
             store.mark_running(spec.trial_id, worker="bench")
             time.sleep(1.0 / per_s)
-            result = SimulationResult(status=SimulationStatus.OK, n_items=30, n_remaining=rng.randint(0, 30),
-                                      wall_time_s=rng.uniform(20, 400))
+            n_remaining = rng.randint(0, 30)
+            wall = rng.uniform(20, 400)
+            result = SimulationResult(status=SimulationStatus.OK, n_items=30, n_remaining=n_remaining,
+                                      wall_time_s=wall, cost=wall * 1e6)
             store.record_result(TrialOutcome(spec.trial_id, result, worker="bench"))
+            objectives[spec.trial_id] = (abs(n_remaining - 4.0), result.cost)
             if time.time() >= stop:
                 return
+        generation += 1
+        store.save_generation(study_id, generation, b"", pareto, None, objectives)
 
 
 async def load(
@@ -352,8 +364,12 @@ def main() -> None:
         if writer is not None:
             writer.terminate()
             writer.join(10)
-        server.terminate()
-        server.wait(timeout=10)
+        server.terminate()  # graceful: it waits for requests in flight, a view still building
+        try:
+            server.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
 
     everything = [v for values in result["latencies"].values() for v in values]
     mode = ("dashboard polls, " if args.dashboard else "") + (
