@@ -370,6 +370,13 @@ class ShapePage(_Wire):
     offset: int
 
 
+def page_of(page_type: type[_Wire], read_type: type[_Wire], page, limit: int, offset: int):
+    """A wire page (``ShapePage``, ``SimulationPage``) of a store page of rows, each read as
+    ``read_type``."""
+    items = [read_type.model_validate(row) for row in page.items]
+    return page_type(items=items, total=page.total, limit=limit, offset=offset)
+
+
 class ErrorDetail(BaseModel):
     """Every error: a 4xx status and one message that says what to fix."""
 

@@ -17,7 +17,6 @@ import os
 import statistics
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -25,7 +24,7 @@ from pathlib import Path
 # library's queue module that uvicorn imports.
 sys.path[0] = str(Path(__file__).resolve().parents[1])
 
-from tests.dashboard.conftest import CHROMIUM, CHROMIUM_ARGS, _free_port  # noqa: E402
+from tests.dashboard.conftest import CHROMIUM, CHROMIUM_ARGS, serving  # noqa: E402
 from tests.dashboard.seed import migrated_store, seed_study  # noqa: E402
 
 DRAWN = "() => performance.getEntriesByName('demcal:plots-drawn').length > 0"
@@ -46,10 +45,8 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     args = parser.parse_args()
 
-    import uvicorn
     from playwright.sync_api import sync_playwright
 
-    from api.app import create_app
     from api.settings import load_settings
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -63,19 +60,14 @@ def main() -> None:
         )
         print(f"seeded {len(study.trial_ids)} trials in {time.perf_counter() - started:.1f} s")
         settings = load_settings(database_url=url, data_dir=Path(tmp) / "data")
-        port = _free_port()
-        server = uvicorn.Server(uvicorn.Config(create_app(settings), port=port, log_level="warning"))
-        threading.Thread(target=server.run, daemon=True).start()
-        while not server.started:
-            time.sleep(0.05)
-        with sync_playwright() as playwright:
+        with serving(settings) as base, sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
             context = browser.new_context(viewport={"width": 1440, "height": 900})
             context.add_init_script(f"localStorage.setItem('demcal.apiKey', {study.api_key!r})")
             page = context.new_page()
             timings = []
             for run in range(args.runs):
-                page.goto(f"http://127.0.0.1:{port}/studies/{study.study_id}")
+                page.goto(f"{base}/studies/{study.study_id}")
                 page.wait_for_function(DRAWN, timeout=60_000)
                 points = page.evaluate("() => document.getElementById('pareto-plot').data[0].x.length")
                 pareto, everything = (ms / 1000 for ms in page.evaluate(MARKS))
@@ -87,7 +79,6 @@ def main() -> None:
                     f"{loaded:.2f} s, Pareto front drawn at {pareto:.2f} s, all plots at {everything:.2f} s"
                 )
             browser.close()
-        server.should_exit = True
         warm = timings[1:] or timings
         print(
             f"study page, {len(study.trial_ids)} trials: Pareto front cold {timings[0][0]:.2f} s, warm "

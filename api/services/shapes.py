@@ -20,7 +20,7 @@ from typing import Any
 from api.auth import Principal
 from api.errors import InvalidInputError, NotFoundError, PayloadTooLargeError
 from api.models import ShapeRow
-from api.schemas import ShapePage, ShapeRead
+from api.schemas import ShapePage, ShapeRead, page_of
 from api.settings import Settings
 from api.store import SqlStore, new_id
 from dem.scenarios.paths import shape_file
@@ -81,10 +81,7 @@ def get_shape(store: SqlStore, shape_id: str, principal: Principal) -> ShapeRead
 
 def list_shapes(store: SqlStore, principal: Principal, limit: int, offset: int) -> ShapePage:
     page = store.list_shapes(principal.visible_to, limit, offset)
-    return ShapePage(
-        items=[ShapeRead.model_validate(row) for row in page.items], total=page.total, limit=limit,
-        offset=offset,
-    )
+    return page_of(ShapePage, ShapeRead, page, limit, offset)
 
 
 def delete_shape(store: SqlStore, settings: Settings, shape_id: str, principal: Principal) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from api.auth import Principal
 from api.errors import InvalidInputError
-from api.schemas import SimulationCreate, SimulationPage, SimulationRead
+from api.schemas import SimulationCreate, SimulationPage, SimulationRead, page_of
 from api.services.scenario_paths import confine_paths
 from api.services.shapes import attach_uploaded_shapes
 from api.store import SqlStore
@@ -45,7 +45,4 @@ def get_simulation(store: SqlStore, sim_id: str, principal: Principal) -> Simula
 
 def list_simulations(store: SqlStore, principal: Principal, limit: int, offset: int) -> SimulationPage:
     page = store.list_simulations(principal.visible_to, limit, offset)
-    return SimulationPage(
-        items=[SimulationRead.model_validate(row) for row in page.items], total=page.total, limit=limit,
-        offset=offset,
-    )
+    return page_of(SimulationPage, SimulationRead, page, limit, offset)

@@ -10,9 +10,11 @@ from ``tests/dashboard/screenshots.py``.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,12 +56,34 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
-@pytest.fixture(scope="session")
-def dashboard(tmp_path_factory):
-    """The app on a seeded SQLite store, listening on 127.0.0.1:<free port> until the session ends."""
+@contextlib.contextmanager
+def serving(settings, start_within_s: float = 20.0) -> Iterator[str]:
+    """The app of ``settings`` served by uvicorn in a thread on 127.0.0.1:<free port>; yields its
+    base URL (the browser tests, ``screenshots.py`` and ``benchmarks/dashboard_render.py``)."""
     import uvicorn
 
     from api.app import create_app
+
+    port = _free_port()
+    config = uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + start_within_s
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            raise RuntimeError(f"uvicorn did not start the dashboard within {start_within_s:g} s")
+        time.sleep(0.05)
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+
+
+@pytest.fixture(scope="session")
+def dashboard(tmp_path_factory):
+    """The app on a seeded SQLite store, listening on 127.0.0.1:<free port> until the session ends."""
     from api.settings import load_settings
 
     root = tmp_path_factory.mktemp("dashboard")
@@ -67,22 +91,10 @@ def dashboard(tmp_path_factory):
     store = migrated_store(url)
     study = seed_study(store)
     study.replay_trial_id = study.trial_ids[5]
-    snapshots = root / "data" / "snapshots" / study.replay_trial_id
-    snapshot_run(snapshots, len(RETAINED_IN_REPLAY), RETAINED_IN_REPLAY)
     settings = load_settings(database_url=url, data_dir=root / "data")
-    port = _free_port()
-    config = uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started:
-        if time.monotonic() > deadline or not thread.is_alive():
-            pytest.fail("uvicorn did not start the dashboard within 20 s")
-        time.sleep(0.05)
-    yield Dashboard(f"http://127.0.0.1:{port}", study, store)
-    server.should_exit = True
-    thread.join(timeout=10)
+    snapshot_run(settings.snapshot_root / study.replay_trial_id, len(RETAINED_IN_REPLAY), RETAINED_IN_REPLAY)
+    with serving(settings) as base_url:
+        yield Dashboard(base_url, study, store)
     store.engine.dispose()
 
 

@@ -17,14 +17,12 @@ import json
 import shutil
 import sys
 import tempfile
-import threading
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from dem.result import SimulationResult  # noqa: E402
-from tests.dashboard.conftest import CHROMIUM, CHROMIUM_ARGS, REPO, _free_port  # noqa: E402
+from tests.dashboard.conftest import CHROMIUM, CHROMIUM_ARGS, REPO, serving  # noqa: E402
 from tests.dashboard.seed import migrated_store, seed_study  # noqa: E402
 
 REPLAY_INDIVIDUAL = 57  # a generation-1 individual: the run shows up among the GA's trials
@@ -36,10 +34,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=REPO / "docs")
     args = parser.parse_args()
 
-    import uvicorn
     from playwright.sync_api import sync_playwright
 
-    from api.app import create_app
     from api.settings import load_settings
 
     real = {}
@@ -54,16 +50,10 @@ def main() -> None:
             store, population=50, offspring=15, generations=9, real_results=real, failing=True
         )
         trial = study.trial_ids[REPLAY_INDIVIDUAL]
-        if args.snapshots:
-            shutil.copytree(args.snapshots, Path(tmp) / "data" / "snapshots" / trial)
         settings = load_settings(database_url=url, data_dir=Path(tmp) / "data")
-        port = _free_port()
-        server = uvicorn.Server(uvicorn.Config(create_app(settings), port=port, log_level="warning"))
-        threading.Thread(target=server.run, daemon=True).start()
-        while not server.started:
-            time.sleep(0.05)
-        base = f"http://127.0.0.1:{port}"
-        with sync_playwright() as playwright:
+        if args.snapshots:
+            shutil.copytree(args.snapshots, settings.snapshot_root / trial)
+        with serving(settings) as base, sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
             context = browser.new_context(viewport={"width": 1440, "height": 900})
             context.add_init_script(f"localStorage.setItem('demcal.apiKey', {study.api_key!r})")
