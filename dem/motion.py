@@ -78,9 +78,6 @@ class SinusoidalTranslation:
     def velocity(self, t: float) -> np.ndarray:
         return evaluate(self.row(), t)[1]
 
-    def acceleration(self, t: float) -> np.ndarray:
-        return evaluate(self.row(), t)[2]
-
 
 @dataclass(frozen=True)
 class LinearLift:

@@ -247,9 +247,6 @@ class Simulation:
     def wall_displacement(self, k: int, t: float | None = None) -> np.ndarray:
         return evaluate(self._walls.motion[k], self.t if t is None else t)[0]
 
-    def wall_velocity(self, k: int, t: float | None = None) -> np.ndarray:
-        return evaluate(self._walls.motion[k], self.t if t is None else t)[1]
-
     def wall_vertices(self, k: int, t: float | None = None) -> np.ndarray:
         """Vertices of wall k at time t (now by default)."""
         return self.walls[k].vertices + self.wall_displacement(k, t)

@@ -78,14 +78,6 @@ class WallMesh:
         return len(self.facets)
 
     @classmethod
-    def from_file(cls, path, **kwargs) -> WallMesh:
-        """Load an STL/OBJ/PLY file with trimesh."""
-        import trimesh
-
-        mesh = trimesh.load(path, force="mesh", process=False)
-        return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces), **kwargs)
-
-    @classmethod
     def box(cls, lo, hi, *, open_top: bool = True, **kwargs) -> WallMesh:
         """The inside of an axis-aligned box (floor, four sides and, unless open, a lid)."""
         lo = np.asarray(lo, dtype=np.float64)

@@ -38,6 +38,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
+from dem.parameters import PARAMETER_NAMES
 from dem.result import SimulationResult, SimulationStatus
 from dem.scenarios.base import ParamsConfig, Response, RunControl, Scenario, Section, merged_params
 from dem.scenarios.feeder import ItemsConfig, demcal_version
@@ -454,7 +455,7 @@ def time_step(config: HeapConfig, params: dict[str, float]) -> float:
 
     merged = {
         **config.params.model_dump(),
-        **{k: v for k, v in params.items() if k in ("E", "nu", "e", "mu")},
+        **{k: v for k, v in params.items() if k in PARAMETER_NAMES},
     }
     contact = ContactParams(**{k: float(v) for k, v in merged.items()})
     if config.particles.shape == "spheres":
