@@ -1,5 +1,6 @@
 """Time integration of the rigid bodies: velocity Verlet as in LIGGGHTS, with the free-rotor
-splitting for rotation (``dem.quaternion.free_rotor_step``)::
+splitting for rotation (``dem.quaternion.free_rotor_step``; a body with equal principal moments
+turns exactly about L, ``isotropic_rotor_step``)::
 
     kick:   v += dt/2 F/m;  L += dt/2 T            (L: world-frame angular momentum)
     drift:  x += dt v;      q <- free rotor over dt
@@ -16,7 +17,7 @@ from __future__ import annotations
 import numba
 
 from dem.conf import JIT_FLAGS
-from dem.quaternion import free_rotor_step, to_matrix
+from dem.quaternion import free_rotor_step, isotropic_rotor_step, to_matrix
 
 
 @numba.njit(**JIT_FLAGS)
@@ -56,10 +57,13 @@ def drift(bodies, lb, dt):
             continue
         for k in range(3):
             pos[b, k] += dt * vel[b, k]
-        r = rot[b]
-        for k in range(3):
-            lb[k] = r[0, k] * angmom[b, 0] + r[1, k] * angmom[b, 1] + r[2, k] * angmom[b, 2]
-        free_rotor_step(quat[b], lb, inertia[b], dt)
+        if inertia[b, 0] == inertia[b, 1] and inertia[b, 1] == inertia[b, 2]:
+            isotropic_rotor_step(quat[b], angmom[b], inertia[b, 0], dt)
+        else:
+            r = rot[b]
+            for k in range(3):
+                lb[k] = r[0, k] * angmom[b, 0] + r[1, k] * angmom[b, 1] + r[2, k] * angmom[b, 2]
+            free_rotor_step(quat[b], lb, inertia[b], dt)
         to_matrix(quat[b], rot[b])
 
 
@@ -87,7 +91,7 @@ def update_spheres(spheres, bodies, x_build):
 
 @numba.njit(**JIT_FLAGS)
 def update_omega(bodies):
-    """omega = R I^-1 R^T L for every active body."""
+    """omega = R I^-1 R^T L for every active body (L / I when the principal moments are equal)."""
     active, rot, angmom, inertia, omega = (
         bodies.active,
         bodies.rot,
@@ -97,6 +101,10 @@ def update_omega(bodies):
     )
     for b in range(active.shape[0]):
         if not active[b]:
+            continue
+        if inertia[b, 0] == inertia[b, 1] and inertia[b, 1] == inertia[b, 2]:
+            for k in range(3):
+                omega[b, k] = angmom[b, k] / inertia[b, 0]
             continue
         r = rot[b]
         lx = r[0, 0] * angmom[b, 0] + r[1, 0] * angmom[b, 1] + r[2, 0] * angmom[b, 2]

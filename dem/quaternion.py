@@ -5,6 +5,9 @@ The rotation step is the symplectic splitting of the free rotor (Dullweber, Leim
 McLachlan, J. Chem. Phys. 107 (1997) 5840): the body turns exactly about each principal axis in
 turn, 1 (h/2), 2 (h/2), 3 (h), 2 (h/2), 1 (h/2). The world-frame angular momentum is the state,
 so it is conserved to rounding when no torque acts, and the energy error stays bounded (no drift).
+A body with equal principal moments (a sphere) needs no splitting: it turns exactly about its
+world-frame L by |L| h / I in one step (``isotropic_rotor_step``), which needs neither the
+body-frame L nor a square root for the small angles of most steps.
 Kernels only: nothing here knows about bodies, contacts or walls.
 """
 
@@ -18,17 +21,39 @@ import numpy as np
 from dem.conf import JIT_FLAGS
 
 
+# Below this half angle (rad) the Taylor series of sin and cos, to the terms kept, are exact to
+# rounding; they are several times cheaper than the libm calls. Coefficients are multiplied, not
+# divided: a division costs several multiplications' latency in this dependent chain.
+_SERIES_HALF_ANGLE = 1e-2
+_S3, _S5, _S7 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0
+_C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
+
+
+@numba.njit(**JIT_FLAGS)
+def _sinc_cos_series(x2):
+    """(sin(x) / x, cos(x)) for x * x = x2 < _SERIES_HALF_ANGLE**2."""
+    return 1.0 + x2 * (_S3 + x2 * (_S5 + x2 * _S7)), 1.0 + x2 * (_C2 + x2 * (_C4 + x2 * (_C6 + x2 * _C8)))
+
+
 @numba.njit(**JIT_FLAGS)
 def half_angle_sin_cos(angle):
-    """(sin(angle/2), cos(angle/2)); Taylor series for small angles, where most steps are, because
-    it is exact to rounding there and several times cheaper than the libm calls."""
+    """(sin(angle/2), cos(angle/2))."""
     x = 0.5 * angle
-    if abs(x) < 1e-2:
-        x2 = x * x
-        s = x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0)))
-        c = 1.0 - x2 / 2.0 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0)))
-        return s, c
+    if abs(x) < _SERIES_HALF_ANGLE:
+        sinc, c = _sinc_cos_series(x * x)
+        return x * sinc, c
     return math.sin(x), math.cos(x)
+
+
+@numba.njit(**JIT_FLAGS)
+def _renormalise(q):
+    """q / |q| for a q within rounding of unit length: one Newton step for 1 / sqrt(|q|^2) from 1
+    (its error is of order (|q|^2 - 1)^2), no square root or division."""
+    scale = 1.5 - 0.5 * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    q[0] *= scale
+    q[1] *= scale
+    q[2] *= scale
+    q[3] *= scale
 
 
 @numba.njit(**JIT_FLAGS)
@@ -81,32 +106,38 @@ def _turn_about_body_axis(q, lb, axis, angle):
 @numba.njit(**JIT_FLAGS)
 def free_rotor_step(q, lb, inertia, h):
     """Advance orientation q by h with body-frame angular momentum lb (both updated in place)."""
-    if inertia[0] == inertia[1] and inertia[1] == inertia[2]:
-        # Isotropic body: the exact solution is one turn about L.
-        wx = lb[0] / inertia[0]
-        wy = lb[1] / inertia[0]
-        wz = lb[2] / inertia[0]
-        rate = math.sqrt(wx * wx + wy * wy + wz * wz)
-        if rate == 0.0:
-            return
-        s, c = half_angle_sin_cos(rate * h)
-        ax, ay, az = wx / rate * s, wy / rate * s, wz / rate * s
-        w, x, y, z = q[0], q[1], q[2], q[3]
-        q[0] = w * c - x * ax - y * ay - z * az
-        q[1] = w * ax + x * c + y * az - z * ay
-        q[2] = w * ay - x * az + y * c + z * ax
-        q[3] = w * az + x * ay - y * ax + z * c
+    _turn_about_body_axis(q, lb, 0, 0.5 * h * lb[0] / inertia[0])
+    _turn_about_body_axis(q, lb, 1, 0.5 * h * lb[1] / inertia[1])
+    _turn_about_body_axis(q, lb, 2, h * lb[2] / inertia[2])
+    _turn_about_body_axis(q, lb, 1, 0.5 * h * lb[1] / inertia[1])
+    _turn_about_body_axis(q, lb, 0, 0.5 * h * lb[0] / inertia[0])
+    _renormalise(q)
+
+
+@numba.njit(**JIT_FLAGS)
+def isotropic_rotor_step(q, angmom, inertia, h):
+    """Advance orientation q by h for a body with equal principal moments ``inertia`` and
+    world-frame angular momentum ``angmom``: q <- exp(|L| h / (2 I) L / |L|) (x) q, exact."""
+    lx, ly, lz = angmom[0], angmom[1], angmom[2]
+    half = 0.5 * h / inertia  # half angle per unit |L|
+    l2 = lx * lx + ly * ly + lz * lz
+    if l2 == 0.0:
+        return
+    x2 = half * half * l2  # (half angle)^2
+    if x2 < _SERIES_HALF_ANGLE * _SERIES_HALF_ANGLE:
+        sinc, c = _sinc_cos_series(x2)
+        s_per_l = half * sinc  # sin(half angle) / |L|
     else:
-        _turn_about_body_axis(q, lb, 0, 0.5 * h * lb[0] / inertia[0])
-        _turn_about_body_axis(q, lb, 1, 0.5 * h * lb[1] / inertia[1])
-        _turn_about_body_axis(q, lb, 2, h * lb[2] / inertia[2])
-        _turn_about_body_axis(q, lb, 1, 0.5 * h * lb[1] / inertia[1])
-        _turn_about_body_axis(q, lb, 0, 0.5 * h * lb[0] / inertia[0])
-    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    q[0] /= norm
-    q[1] /= norm
-    q[2] /= norm
-    q[3] /= norm
+        length = math.sqrt(l2)
+        s_per_l = math.sin(half * length) / length
+        c = math.cos(half * length)
+    ax, ay, az = lx * s_per_l, ly * s_per_l, lz * s_per_l
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    q[0] = c * w - ax * x - ay * y - az * z
+    q[1] = c * x + w * ax + ay * z - az * y
+    q[2] = c * y + w * ay + az * x - ax * z
+    q[3] = c * z + w * az + ax * y - ay * x
+    _renormalise(q)
 
 
 def matrix(q) -> np.ndarray:

@@ -128,6 +128,23 @@ def test_torque_free_asymmetric_body_keeps_angular_momentum():
     assert 0.5 * sim.bodies.omega[0] @ l1 == pytest.approx(energy0, rel=1e-3)
 
 
+def test_torque_free_sphere_turns_about_its_angular_momentum_at_omega():
+    params = ContactParams(E=1e7, nu=0.3, e=0.5, mu=0.5)
+    ball = Clump.solid_sphere(0.005, 2500.0)
+    omega = np.array([-30.0, 70.0, 45.0])  # a half angle of 4.6e-4 rad per step: the series branch
+    sim = Simulation(params, gravity=(0, 0, 0), domain_min=(-1, -1, -1), domain_max=(1, 1, 1), dt=1e-5)
+    q0 = from_axis_angle((0.3, -0.5, 0.8), 1.1)
+    sim.add_body(ball, (0, 0, 0), quaternion=q0, omega=omega)
+    steps = 20_000
+
+    report = sim.run(steps * 1e-5, chunk_time=0.05)
+
+    assert report.steps == steps
+    expected = matrix(from_axis_angle(omega, np.linalg.norm(omega) * steps * 1e-5)) @ matrix(q0)
+    assert np.abs(matrix(sim.bodies.quat[0]) - expected).max() < 1e-11
+    assert np.abs(sim.bodies.omega[0] - omega).max() < 1e-12 * np.linalg.norm(omega)
+
+
 def drop_flat(box: Clump, height: float, params: ContactParams):
     """Static overlap and first rebound height of a box dropped flat from ``height``."""
     sim = floor_sim(params)
