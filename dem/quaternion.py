@@ -20,7 +20,6 @@ import numpy as np
 
 from dem.conf import JIT_FLAGS
 
-
 # Below this half angle (rad) the Taylor series of sin and cos, to the terms kept, are exact to
 # rounding; they are several times cheaper than the libm calls. Coefficients are multiplied, not
 # divided: a division costs several multiplications' latency in this dependent chain.
