@@ -44,7 +44,7 @@ def list_studies(
 @router.get("/{study_id}", response_model=StudyRead)
 def get_study(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
     """A study with its progress (trials done / total, generation) and best trial so far."""
-    return studies.get_study(store, study_id, principal, views)
+    return Response(studies.study_json(store, views, study_id, principal), media_type="application/json")
 
 
 @router.post("/{study_id}/pause", response_model=StudyRead)

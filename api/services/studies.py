@@ -103,11 +103,11 @@ def get_study(
     """The study as clients read it; with ``views`` (the polled route), its best trial comes from
     the view cache: it changes only when objectives are written, which versions the study."""
     row = store.get_study(study_id, principal.visible_to)
-    counts = store.trial_state_counts(study_id)
+    counts, status_counts = store.trial_counts(study_id)
     parsed = _parsed(row.definition)
     trials_total, generations_total = _budget(parsed)
     best = _best_trial(store, row, views)
-    failures = _failures(store.run_status_counts(study_id))
+    failures = _failures(status_counts)
     return StudyRead(
         id=row.id, name=row.name, owner=row.owner, status=StudyStatus(row.status), message=row.message,
         definition=row.definition,
@@ -123,6 +123,20 @@ def get_study(
         created_at=row.created_at, updated_at=row.updated_at,
         started_at=row.started_at, finished_at=row.finished_at, responses=declared_responses(row.definition),
         f1_unit=f1_unit(row.definition), f1_rule=f1_rule(parsed) if parsed else "",
+    )
+
+
+def study_json(store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal) -> bytes:
+    """``get_study`` as JSON, built once per version of the study and of its trials: the read
+    every open dashboard polls, while results change it a few times a second at most. The
+    trials' version is their newest ``updated_at``: a write stamped no later than the newest one
+    already there (the same clock tick, another process's slower clock) shows at the next write;
+    a study's last result is followed by writes to the study row, so a finished study's counts
+    are final."""
+    version = store.study_version(study_id, principal.visible_to)
+    return views.get_or_build(
+        "study", study_id, (version.updated_at, version.generation, version.trials_changed_at),
+        lambda: get_study(store, study_id, principal, views).model_dump_json().encode(),
     )
 
 

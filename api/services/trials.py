@@ -20,6 +20,7 @@ import csv
 import io
 import math
 from collections.abc import Iterator
+from datetime import UTC
 
 from api.auth import Principal
 from api.models import TrialRow, decode_value, utcnow
@@ -35,7 +36,7 @@ from api.schemas import (
 )
 from api.services.generations import latest_generation
 from api.services.views import StudyViewCache
-from api.store import SqlStore, TrialFilter
+from api.store import Page, SqlStore, TrialFilter
 from optimizer.generations import Run, per_generation
 from optimizer.outcomes import individual_failures, is_failed, measured_n
 from optimizer.protocols import PARAMETER_NAMES, StudyStatus, TrialState
@@ -101,18 +102,27 @@ def list_trials_json(
     """A ``TrialPage`` as JSON bytes, from plain rows (no ORM objects, one serialisation pass).
 
     The unfiltered total only changes when trials are added, which updates the study row, so it
-    is cached per study version like the Pareto front; filtered totals are counted each time.
+    is cached per study version like the Pareto front; filtered totals are counted each time,
+    unless the page itself tells (``trial_page_rows``). A dashboard's poll for the changes since
+    its last one (``updated_since``) when no trial changed since is answered from the study's
+    version alone: nothing is newer than its trials' newest ``updated_at``.
     """
-    study = store.study_version(study_id, principal.visible_to)
-    # Taken before the query, so a row updated while we read is sent again next poll, not missed.
+    # Taken before the queries, so a row updated while we read is sent again next poll, not missed.
     server_time = utcnow()
-    total = None
-    if where == TrialFilter():
-        total = int(views.get_or_build(
-            "trial-count", study_id, (study.updated_at, study.generation),
-            lambda: str(store.trial_count(study_id, where)).encode(),
-        ))
-    page = store.trial_page_rows(study_id, where, limit, offset, total=total)
+    study = store.study_version(study_id, principal.visible_to)
+    since = where.updated_since
+    if since is not None and since.tzinfo is None:
+        since = since.replace(tzinfo=UTC)  # as the store reads a naive time
+    if since is not None and (study.trials_changed_at is None or study.trials_changed_at < since):
+        page = Page([], 0)
+    else:
+        total = None
+        if where == TrialFilter():
+            total = int(views.get_or_build(
+                "trial-count", study_id, (study.updated_at, study.generation),
+                lambda: str(store.trial_count(study_id, where)).encode(),
+            ))
+        page = store.trial_page_rows(study_id, where, limit, offset, total=total)
     return TrialPage.model_validate(
         {"items": [_trial_item(row) for row in page.items], "total": page.total, "limit": limit,
          "offset": offset, "server_time": server_time}
@@ -185,11 +195,14 @@ def recommendation(store: SqlStore, study_id: str, principal: Principal) -> Reco
         tolerance = 0.0
     matching: dict[int, ParetoPoint] = {}
     for row in store.trial_columns(study_id):
-        point = _pareto_point(row)
-        if row.status != "ok" or point.f1 is None or point.f1 > tolerance:
+        # One entry per parameter set: replicates of an individual share their objectives. The
+        # filter comes before building the point: most of a long study's trials do not match.
+        if row.status != "ok" or row.individual in matching:
             continue
-        # One entry per parameter set: replicates of an individual share their objectives.
-        matching.setdefault(row.individual, point)
+        f1 = _finite_objective(row.f1_value, row.f1_kind)
+        if f1 is None or f1 > tolerance:
+            continue
+        matching[row.individual] = _pareto_point(row)
     equivalent = sorted(matching.values(), key=lambda p: (_sort_key(p.f2), _sort_key(p.f1)))
     return RecommendationRead(
         study_id=study_id, status=StudyStatus(study.status), recommendation=study.recommendation,

@@ -61,16 +61,19 @@ class DashboardReads(StoreBase):
     ) -> Page:
         """A page of the trial list as plain rows of the columns ``TrialRead`` needs: no ORM
         objects are built (that was most of a page's cost), and no JSON blob but ``params``.
-        ``total``, when the caller knows it, saves the count query."""
+        ``total``, when the caller knows it, saves the count query; so does a page that is the
+        last one (fewer rows than ``limit``, and some or it is the first): it tells the total."""
         clauses = self._trial_clauses(study_id, where)
         with self.session() as s:
-            if total is None:
-                total = s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses))
             rows = s.execute(
                 sa.select(*TRIAL_READ_COLUMNS).where(*clauses)
                 .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate)
                 .limit(limit).offset(offset)
             ).all()
+            if total is None and len(rows) < limit and (rows or offset == 0):
+                total = offset + len(rows)
+            if total is None:
+                total = s.scalar(sa.select(sa.func.count()).select_from(TrialRow).where(*clauses))
             return Page(list(rows), int(total or 0))
 
     def pareto_columns(self, study_id: str) -> list[sa.Row]:
@@ -182,17 +185,21 @@ class DashboardReads(StoreBase):
         with self.session() as s:
             return {state: int(n) for state, n in s.execute(query)}
 
-    def run_status_counts(self, study_id: str) -> dict[str, int]:
-        """Finished trials of a study by how their simulation ended (ok, unstable, ...)."""
+    def trial_counts(self, study_id: str) -> tuple[dict[str, int], dict[str, int]]:
+        """A study's trials by state, and its finished trials by how their simulation ended (ok,
+        unstable, ...), from one grouped query."""
+        by_state: dict[str, int] = {}
+        by_status: dict[str, int] = {}
         with self.session() as s:
-            return {
-                status: int(n)
-                for status, n in s.execute(
-                    sa.select(TrialRow.status, sa.func.count())
-                    .where(TrialRow.study_id == study_id, TrialRow.status.is_not(None))
-                    .group_by(TrialRow.status)
-                )
-            }
+            for state, status, n in s.execute(
+                sa.select(TrialRow.state, TrialRow.status, sa.func.count())
+                .where(TrialRow.study_id == study_id)
+                .group_by(TrialRow.state, TrialRow.status)
+            ):
+                by_state[state] = by_state.get(state, 0) + int(n)
+                if status is not None:
+                    by_status[status] = by_status.get(status, 0) + int(n)
+        return by_state, by_status
 
     def study_status_counts(self) -> dict[str, int]:
         with self.session() as s:

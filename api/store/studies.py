@@ -55,11 +55,19 @@ class StudyStore(StoreBase):
             return self._study_row(s, study_id, visible_to)
 
     def study_version(self, study_id: str, visible_to: str | None = ALL_OWNERS) -> sa.Row:
-        """(id, updated_at, generation) of a visible study, without loading its JSON columns:
-        the check that a hot read may go ahead, and the version of cached views."""
+        """(id, owner, status, updated_at, generation, trials_changed_at) of a visible study, without
+        loading its JSON columns: the check that a hot read may go ahead, and the version of
+        cached views. ``trials_changed_at`` is the newest ``updated_at`` of its trials (every
+        trial write sets it; one index lookup), the version of what results change: counts."""
+        changed = (
+            sa.select(sa.func.max(TrialRow.updated_at)).where(TrialRow.study_id == study_id).scalar_subquery()
+        )
         with self.session() as s:
             row = s.execute(
-                sa.select(StudyRow.id, StudyRow.owner, StudyRow.updated_at, StudyRow.generation)
+                sa.select(
+                    StudyRow.id, StudyRow.owner, StudyRow.status, StudyRow.updated_at, StudyRow.generation,
+                    changed.label("trials_changed_at"),
+                )
                 .where(StudyRow.id == study_id)
             ).one_or_none()
         if row is None or not (visible_to is ALL_OWNERS or row.owner == visible_to):

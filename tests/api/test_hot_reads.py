@@ -207,3 +207,57 @@ def test_polling_the_recommendation_builds_it_once_per_version(client, keys, sto
     assert all(poll == polls[0] for poll in polls) and polls[0]["equivalent"]
     assert after == polls[0]
     assert built == [study_id, study_id]  # once for the five polls, once after the row changed
+
+
+def test_each_dashboard_poll_costs_one_query_and_the_study_read_follows_every_trial_write(
+    settings, keys, store, engine
+):
+    from dataclasses import replace
+
+    import sqlalchemy as sa
+
+    from optimizer.protocols import TrialOutcome, trial_id
+
+    held = settings.model_copy(update={"api_key_cache_s": 3600.0})  # the key is checked once, then cached
+    statements: list[str] = []
+
+    def count(*args):
+        statements.append(args[2])
+    study_id = _run(store)
+    base = f"/api/v1/studies/{study_id}"
+    polled = ["", "/recommendation", "/progress", "/identifiability", "/pareto"]
+    with TestClient(create_app(held, engine=engine)) as client:
+        for path in polled:  # the pages' first load builds every view
+            client.get(base + path, headers=keys.auth()).raise_for_status()
+        cursor = client.get(f"{base}/trials", params={"limit": 1}, headers=keys.auth()).json()["server_time"]
+        sa.event.listen(engine, "before_cursor_execute", count)
+        try:
+            cost = {}
+            for path in polled:
+                statements.clear()
+                client.get(base + path, headers=keys.auth()).raise_for_status()
+                cost[path] = len(statements)
+            statements.clear()
+            since = {"updated_since": cursor}
+            unchanged = client.get(f"{base}/trials", params=since, headers=keys.auth()).json()
+            cost["/trials?updated_since"] = len(statements)
+        finally:
+            sa.event.remove(engine, "before_cursor_execute", count)
+        template = store.trials(study_id)[0].spec
+        new = replace(template, trial_id=trial_id(study_id, 99, 0), individual=99, generation=3)
+        store.add_trials([new])
+        seen = [client.get(base, headers=keys.auth()).json()["progress"]]
+        store.mark_running(new.trial_id, worker="w1")  # a write to the trial alone, not to the study row
+        seen.append(client.get(base, headers=keys.auth()).json()["progress"])
+        store.record_result(TrialOutcome(new.trial_id, synthetic_result(new)))
+        seen.append(client.get(base, headers=keys.auth()).json()["progress"])
+        changed = client.get(f"{base}/trials", params={"updated_since": cursor}, headers=keys.auth()).json()
+
+    assert cost == dict.fromkeys(cost, 1), cost
+    assert unchanged["items"] == [] and unchanged["total"] == 0
+    assert [p["trials_by_state"].get("pending", 0) for p in seen] == [1, 0, 0]
+    assert [p["trials_by_state"].get("running", 0) for p in seen] == [0, 1, 0]
+    assert seen[2]["trials_done"] == seen[0]["trials_done"] + 1
+    assert seen[2]["failures"] == seen[0]["failures"]
+    assert [item["id"] for item in changed["items"]] == [new.trial_id] and changed["total"] == 1
+
