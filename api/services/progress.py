@@ -67,5 +67,8 @@ def identifiability_json(
         result = study_identifiability(evaluations, definition, space)
         return IdentifiabilityRead(study_id=study_id, **result).model_dump_json().encode()
 
-    version = (study.updated_at, study.generation)
+    # Once per completed batch (and status), not per change of the study row (a batch queued,
+    # then saved, changes it twice): a build reads and evaluates every trial and fits a Gaussian
+    # process, seconds of CPU for a long study (benchmarks/README.md).
+    version = (study.generation, study.status)
     return views.get_or_build("identifiability", study_id, version, build, stale_ok=True)
