@@ -352,7 +352,7 @@ def main() -> None:
         if args.results_per_s:
             import multiprocessing
 
-            until = time.time() + args.seconds + 10
+            until = time.time() + 3600  # ended with the load, however long warming the views takes
             writer = multiprocessing.get_context("spawn").Process(
                 target=write_results, args=(url, study_id, args.results_per_s, until)
             )
