@@ -446,23 +446,8 @@ class Driver:
                     genes, *_objectives_and_constraints(again), observations=[observation(ev) for ev in again]
                 )
             ga_state = to_bytes(batch.search)
-        ranking = rank(
-            evaluations,
-            definition.match_tolerance(),
-            context.space,
-            min_replicates=definition.max_replicates,
-        )
-        recommendation = recommendation_json(
-            ranking,
-            definition.experiment.target(),
-            definition.match_tolerance(),
-            definition.objective_time,
-        )
-        verdict = _verdict(ranking)
-        if batch.index == definition.validation_batch():
-            recommendation, verdict = _validated(ranking, records, definition)
-        elif recommendation is not None:
-            recommendation["validation_status"] = NOT_VALIDATED
+        final = batch.index == definition.validation_batch()
+        ranking, recommendation, verdict = recommend(evaluations, records, definition, context.space, final)
         pareto_ids = [tid for evaluation in ranking.pareto for tid in evaluation.trial_ids]
         # Shown objectives depend on an individual's own results only: those of this batch's.
         touched = {spec.individual for spec in batch.specs}
@@ -585,6 +570,27 @@ def _all_invalid(evaluations: list[Evaluation], batch: _Batch) -> str:
         "where the model is invalid, so nothing can be calibrated; raise parameters.E (its low bound "
         f"above {softest:.3g} Pa). First: {initial[-1].failure}"
     )
+
+
+def recommend(
+    evaluations: list[Evaluation],
+    records: list[TrialRecord],
+    definition: StudyDefinition,
+    space: ParameterSpace,
+    final: bool,
+) -> tuple[Ranking, dict | None, str]:
+    """What a study stores after a batch: the ranking, the recommendation (JSON, None when no set
+    matches) and a one-line verdict for the log. ``final`` is the validation batch's: the
+    recommendation then carries the validation table (``optimizer/validation.py``)."""
+    ranking = rank(evaluations, definition.match_tolerance(), space, min_replicates=definition.max_replicates)
+    if final:
+        return ranking, *_validated(ranking, records, definition)
+    recommendation = recommendation_json(
+        ranking, definition.experiment.target(), definition.match_tolerance(), definition.objective_time
+    )
+    if recommendation is not None:
+        recommendation["validation_status"] = NOT_VALIDATED
+    return ranking, recommendation, _verdict(ranking)
 
 
 def _validated(

@@ -25,12 +25,14 @@ from api.auth import create_key
 from api.db import create_db_engine, upgrade_database
 from api.store import SqlStore
 from dem.result import SimulationResult, SimulationStatus
+from optimizer.driver import Driver, recommend
+from optimizer.objectives import evaluate
 from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, trial_id
-from optimizer.study import parse_study
+from optimizer.space import ParameterSpace
+from optimizer.study import VALIDATION_REPLICATE_BASE, StudyDefinition, parse_study
 
 MEASURED = [0, 2, 3, 3, 4, 4, 5, 8, 12, 16]
 N_ITEMS = 30
-TOLERANCE = 0.5
 TRUTH = {"logE": 6.3, "nu": 0.3, "e": 0.45, "mu": 0.42}
 
 
@@ -104,7 +106,7 @@ def seed_study(
     """
     real_results = real_results or {}
     rng = np.random.default_rng(seed)
-    definition = parse_study(
+    study_definition = parse_study(
         {
             "name": name,
             "description": "synthetic trials for the dashboard",
@@ -114,7 +116,8 @@ def seed_study(
             "validation": {"seeds": 0},  # the seeded trials are the search's only
             "objective_time": "wall",
         }
-    ).model_dump(mode="json")
+    )
+    definition = study_definition.model_dump(mode="json")
     target = float(np.median(MEASURED))
     target = math.floor(target + 0.5)
     with store.session() as session:
@@ -175,24 +178,49 @@ def seed_study(
             seeded.n_remaining[spec.trial_id] = n_remaining
         measured = {tid: values for tid, values in objectives.items() if values[0] is not None}
         front = non_dominated(measured)
-        # The paper's rule: the fastest Pareto member that matches the experiment within tolerance.
-        matching = [tid for tid in front if objectives[tid][0] <= TOLERANCE]
-        recommendation = None
-        if matching:
-            best = min(matching, key=lambda tid: objectives[tid][1])
-            recommendation = {  # the shape of optimizer.pareto.recommendation_json
-                "trial_ids": [best], "params": params_of[best], "f1": objectives[best][0],
-                "f2": objectives[best][1], "n_remaining": seeded.n_remaining[best],
-                "wall_time_s": objectives[best][1], "target": target, "tolerance": TOLERANCE,
-                "objective_time": "wall",
-            }
         store.save_generation(
-            study_id, generation + 1, b"synthetic", front, recommendation,
+            study_id, generation + 1, b"synthetic", front,
+            driver_recommendation(store, study_id, study_definition),
             objectives={tid: objectives[tid] for tid in (s.trial_id for s in specs)},
         )
         seeded.pareto_ids = front
     store.set_status(study_id, StudyStatus.DONE)
     return seeded
+
+
+def seed_validated_study(store: SqlStore, owner: str = "alice") -> str:
+    """A feeder study run to its end by the real driver on synthetic results
+    (``optimizer.memory.synthetic_result``), validation included: on the fresh seeds, every third
+    individual fails its first run (unstable), so the table has a set that failed to reproduce
+    beside sets that validate. Returns the study id."""
+    from optimizer.memory import SyntheticExecutor, synthetic_result
+
+    definition = parse_study({
+        "name": "validated-study", "scenario": {},
+        "experiment": {"measured": VALIDATED_MEASURED, "tolerance": 1},
+        "ga": {"population": 16, "offspring": 8, "generations": 4},
+        "validation": {"seeds": 6, "candidates": 3}, "objective_time": "wall",
+    })  # fmt: skip
+
+    def respond(spec: TrialSpec) -> SimulationResult:
+        result = synthetic_result(spec)
+        fresh = spec.generation == definition.validation_batch()
+        if fresh and spec.replicate == VALIDATION_REPLICATE_BASE and spec.individual % 3 == 2:
+            return result.model_copy(update={"status": SimulationStatus.UNSTABLE, "message": "overlap"})
+        return result
+
+    study_id = store.create_study(definition.model_dump(mode="json"), owner=owner)
+    Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
+    return study_id
+
+
+def driver_recommendation(store: SqlStore, study_id: str, definition: StudyDefinition) -> dict | None:
+    """The recommendation a study's driver stores after a search batch, from the stored trials
+    (``optimizer.driver.recommend``): a seeded study shows what a real one would."""
+    records = store.trials(study_id)
+    evaluations = evaluate(records, definition, definition.n_items())
+    space = ParameterSpace(definition.parameters)
+    return recommend(evaluations, records, definition, space, final=False)[1]
 
 
 def _failure(spec: TrialSpec) -> dict | None:
@@ -206,6 +234,7 @@ def _failure(spec: TrialSpec) -> dict | None:
     return None
 
 
+VALIDATED_MEASURED = [12, 13, 14, 15, 15, 16, 18]
 REPLAY_TILT_DEG = 3.0
 REPLAY_VIBRATION = (np.cos(np.radians(25)), 0.0, np.sin(np.radians(25)), 1.5e-3, 60.0, 5.0)
 
@@ -361,7 +390,8 @@ def seed_heap_study(
         measured = {tid: values for tid, values in objectives.items() if values[0] is not None}
         seeded.pareto_ids = non_dominated(measured)
         store.save_generation(
-            study_id, generation + 1, b"synthetic", seeded.pareto_ids, None,
+            study_id, generation + 1, b"synthetic", seeded.pareto_ids,
+            driver_recommendation(store, study_id, definition),
             objectives={s.trial_id: objectives[s.trial_id] for s in specs},
         )
     store.set_status(study_id, StudyStatus.DONE)

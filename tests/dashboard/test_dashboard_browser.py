@@ -14,7 +14,7 @@ import pytest
 from optimizer.protocols import StudyStatus
 from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
-from tests.dashboard.seed import add_finished_trials, seed_study
+from tests.dashboard.seed import add_finished_trials, seed_study, seed_validated_study
 
 pytestmark = pytest.mark.browser
 
@@ -392,7 +392,6 @@ def test_new_study_form_shows_the_api_message_for_an_invalid_definition(page, da
 
 def test_failed_runs_are_drawn_apart_and_counted_by_status(page, dashboard):
     seeded = seed_study(dashboard.store, name="with-failures", failing=True, seed=3)
-    validated = with_validation(dashboard.store, seeded)
     failed = seeded.failed
     counts = Counter(failed.values())
     page.goto(dashboard.url(f"/studies/{seeded.study_id}"))
@@ -414,9 +413,6 @@ def test_failed_runs_are_drawn_apart_and_counted_by_status(page, dashboard):
     )
     facts = page.locator("#study-facts").inner_text()
     verdicts = page.locator("#identifiability tbody tr").count()
-    page.wait_for_selector("#validation-table tbody tr")
-    validation_rows = page.locator("#validation-table tbody tr").all_inner_texts()
-    verdict = page.locator("#validation-status").inner_text()
 
     assert set(counts) == {"unstable", "timeout"}  # the seeded study has both kinds
     measured, front, *strips = pareto
@@ -434,32 +430,29 @@ def test_failed_runs_are_drawn_apart_and_counted_by_status(page, dashboard):
     text = ", ".join(f"{status} {counts[status]}" for status in ("unstable", "timeout"))
     assert f"{sum(counts.values())} ({text})" in facts
     assert verdicts == 4
-    assert verdict == "Validation: validated"
-    assert [row.split("\t")[-1] for row in validation_rows] == [row["verdict"] for row in validated]
-    assert "1 failed" in validation_rows[1]
     assert page.errors == []
     save_screenshot(page, "dashboard-failures")
 
 
-def with_validation(store, seeded) -> list[dict]:
-    """Give the seeded study's recommendation a validation table in the shape the driver stores
-    (``optimizer/validation.py``): the recommended set validated, a second one not reproduced."""
-    study = store.get_study(seeded.study_id)
-    recommendation = dict(study.recommendation)
-    rows = [
-        {"individual": 41, "params": recommendation["params"], "search_f1": 0.0, "search_replicates": 1,
-         "f2": 12.1, "seeds": [11, 12, 13, 14], "n_remaining": [3, 4, 4, 6], "failures": [], "w1": 1.2,
-         "median": 4.0, "median_interval": [3.0, 6.0], "f1": 0.0, "f1_interval": [0.0, 2.0],
-         "verdict": "validated"},
-        {"individual": 34, "params": recommendation["params"], "search_f1": 0.0, "search_replicates": 1,
-         "f2": 12.2, "seeds": [11, 12, 13, 14], "n_remaining": [9, 11, 12],
-         "failures": ["unstable: overlap"], "w1": 6.1, "median": 11.0, "median_interval": [9.0, 12.0],
-         "f1": 7.0, "f1_interval": [5.0, 8.0], "verdict": "not reproduced"},
-    ]
-    recommendation.update(
-        validation_status="validated", validation=rows, f1_interval=[0.0, 1.0], replicates=1
-    )
-    store.save_generation(
-        seeded.study_id, study.generation, b"synthetic", seeded.pareto_ids, recommendation, objectives={}
-    )
-    return rows
+def test_the_validation_table_shows_what_the_driver_stored_after_validating(page, dashboard):
+    study_id = seed_validated_study(dashboard.store)
+    stored = dashboard.store.get_study(study_id).recommendation
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_selector("#validation-table tbody tr")
+
+    rows = page.locator("#validation-table tbody tr").all_inner_texts()
+    verdict = page.locator("#validation-status").inner_text()
+    intro = page.locator("#recommendation p").first.inner_text()
+
+    table = stored["validation"]
+    assert stored["validation_status"] == "validated"
+    assert verdict == "Validation: validated" and intro.startswith("The fastest validated parameter set")
+    assert [row.split("\t")[0] for row in rows] == [f"i{row['individual']}" for row in table]
+    assert [row.split("\t")[-1] for row in rows] == [row["verdict"] for row in table]
+    failed = [k for k, row in enumerate(table) if row["failures"]]
+    assert failed and all(table[k]["verdict"] == "not reproduced" for k in failed)
+    assert all(f"+ {len(table[k]['failures'])} failed" in rows[k] for k in failed)
+    fresh = [", ".join(str(int(v)) for v in row["n_remaining"]) for row in table]
+    assert all(values in text for values, text in zip(fresh, rows, strict=True))
+    assert page.errors == []
+    save_screenshot(page, "dashboard-validation")

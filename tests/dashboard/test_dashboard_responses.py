@@ -10,6 +10,7 @@ import pytest
 
 from tests.dashboard.conftest import save_screenshot
 from tests.dashboard.seed import seed_heap_study
+from tests.dashboard.test_dashboard_browser import js_fmt
 
 pytestmark = pytest.mark.browser
 
@@ -77,7 +78,11 @@ def test_heap_study_shows_the_angle_of_repose_in_degrees_and_no_n_t(page, dashbo
     page.goto(dashboard.url("/"))
     listed = page.locator(f"tr[data-study-id='{heap.study_id}'] td").nth(4)
     listed.wait_for()
-    assert listed.inner_text() == f"no match yet; best f1 so far {min(heap.f1.values()):.3g} deg"
+    # Sets within the tolerance exist, so the list shows the one the driver's rule recommends.
+    recommended = dashboard.store.get_study(heap.study_id).recommendation
+    assert min(heap.f1.values()) <= 1.5 and recommended["f1"] <= 1.5
+    assert listed.inner_text() == f"E = {js_fmt(recommended['params']['E'])}, ν = 0.3, " \
+        f"e = {js_fmt(recommended['params']['e'])}, μ = {js_fmt(recommended['params']['mu'])}"
 
 
 def test_heap_trial_page_shows_the_declared_responses_with_units(page, dashboard, heap):
@@ -118,6 +123,12 @@ def test_heap_and_feeder_study_has_one_panel_per_experiment(page, dashboard):
     hover = fig5["traces"][0]["customdata"][0][5]
     assert "heap angle of repose = " in hover and " deg<br>feeder N<sub>t</sub> = " in hover
     assert hover.endswith(" items")
+    # Sets within the tolerance were found: the page recommends one, as the driver stored it.
+    page.wait_for_selector("#recommendation dl")
+    recommendation = page.locator("#recommendation").inner_text()
+    stored = dashboard.store.get_study(study.study_id).recommendation
+    assert "No parameter set matched" not in recommendation
+    assert f"open trial {stored['trial_ids'][0]}" in recommendation
     assert page.errors == []
     save_screenshot(page, "dashboard-heap-feeder")
 

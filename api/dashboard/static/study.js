@@ -157,6 +157,12 @@ function headerHtml(th, suffix, prefix = "") {
 
 const interval = (pair, digits = 2) => (pair ? `[${fmt(pair[0], digits)}–${fmt(pair[1], digits)}]` : "");
 const VALIDATION_CLASS = { validated: "ok", "not reproduced": "failed", "not validated": "paused" };
+// What the recommendation is, by its validation status (optimizer/validation.py); a set not
+// validated (validation.seeds = 0, or the search still running) is introduced as a search's match.
+const INTRO = {
+  validated: "The fastest validated parameter set (fresh seeds, table below):",
+  "not reproduced": "No candidate reproduced the experiment on fresh seeds (table below); the fastest match of the search:",
+};
 
 async function renderRecommendation() {
   const body = await api(`${base}/recommendation`);
@@ -187,10 +193,9 @@ async function renderRecommendation() {
     const dl = el("dl", { class: "facts" }, ...rows.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
     const verdict = rec.validation_status;
     box.replaceChildren(
-      el("p", { text: verdict ? "The fastest validated parameter set (fresh seeds, table below):"
-        : responses.length === 1
-          ? `The fastest Pareto member whose ${responseText(responses[0])} matches the experiment within tolerance:`
-          : "The fastest Pareto member whose responses match every experiment within tolerance:" }),
+      el("p", { text: INTRO[verdict] || (responses.length === 1
+        ? `The fastest Pareto member whose ${responseText(responses[0])} matches the experiment within tolerance:`
+        : "The fastest Pareto member whose responses match every experiment within tolerance:") }),
       verdict ? el("p", { id: "validation-status" }, "Validation: ",
         el("span", { class: `status ${VALIDATION_CLASS[verdict] || ""}`, text: verdict })) : null,
       dl,
@@ -226,8 +231,8 @@ function renderValidation(rows, measured) {
   document.getElementById("validation-caption").textContent =
     `Experiment: ${responseText(responses[0])} ${measured.join(", ")} (median ${fmt(median)}). ` +
     "Each candidate re-simulated on " +
-    "seeds never used in the search; validated when every fresh run measured and the fresh f1 " +
-    "interval reaches the tolerance.";
+    "seeds never used in the search; validated when every fresh run measured and the fresh runs " +
+    "cannot be told apart from the experiment (a permutation test at the 90 % level).";
   headerHtml(document.getElementById("validation-response"), "", "fresh ");
   document.querySelector("#validation-table tbody").replaceChildren(...rows.map((row) => el("tr",
     { "data-individual": row.individual },
