@@ -99,28 +99,30 @@ def trace_types(page) -> dict[str, dict[str, str]]:
 
 
 def test_plots_switch_to_webgl_and_boxes_above_1500_points(page, dashboard):
+    # Exactly at the threshold, then one point above it: the switch is at 1,500, not near it.
     definition = parse_study({"name": "large", "scenario": {}, "experiment": {"measured": [4]}})
     study_id = dashboard.store.create_study(definition.model_dump(mode="json"), owner="alice")
-    trials = WEBGL_ABOVE + 1
-    add_finished_trials(dashboard.store, study_id, generation=0, first_individual=0, count=trials // 2)
-    add_finished_trials(dashboard.store, study_id, generation=1, first_individual=trials // 2,
-                        count=trials - trials // 2)
-    dashboard.store.set_status(study_id, StudyStatus.DONE)
-    page.goto(dashboard.url(f"/studies/{study_id}"))
-    page.wait_for_function(PLOTTED, arg="pareto-plot")
-    page.wait_for_function("(id) => document.getElementById(id)?.data?.length > 0", arg="parameter-plot")
-    large = trace_types(page)
-    points = page.evaluate("() => document.getElementById('pareto-plot').data[0].x.length")
-    open_study(page, dashboard)  # the seeded study: 185 trials, below the switch
-    page.wait_for_function("(id) => document.getElementById(id)?.data?.length > 0", arg="parameter-plot")
-    small = trace_types(page)
+    store, half = dashboard.store, WEBGL_ABOVE // 2
+    add_finished_trials(store, study_id, generation=0, first_individual=0, count=half)
+    add_finished_trials(store, study_id, generation=1, first_individual=half, count=WEBGL_ABOVE - half)
+    store.set_status(study_id, StudyStatus.DONE)
 
-    assert points == trials
-    assert large["pareto-plot"]["trials"] == large["generation-plot"]["trials"] == "scattergl"
-    assert "box" in set(large["parameter-plot"].values())
-    assert len(dashboard.study.trial_ids) <= WEBGL_ABOVE
-    assert small["pareto-plot"]["trials"] == small["generation-plot"]["trials"] == "scatter"
-    assert "box" not in set(small["parameter-plot"].values())
+    def drawn() -> tuple[int, dict[str, dict[str, str]]]:
+        page.goto(dashboard.url(f"/studies/{study_id}"))
+        page.wait_for_function(PLOTTED, arg="pareto-plot")
+        page.wait_for_function("(id) => document.getElementById(id)?.data?.length > 0", arg="parameter-plot")
+        points = page.evaluate("() => document.getElementById('pareto-plot').data[0].x.length")
+        return points, trace_types(page)
+
+    at_threshold, at = drawn()
+    add_finished_trials(store, study_id, generation=1, first_individual=WEBGL_ABOVE, count=1, seed=12)
+    above_threshold, above = drawn()
+
+    assert (at_threshold, above_threshold) == (WEBGL_ABOVE, WEBGL_ABOVE + 1)
+    assert at["pareto-plot"]["trials"] == at["generation-plot"]["trials"] == "scatter"
+    assert "box" not in set(at["parameter-plot"].values())
+    assert above["pareto-plot"]["trials"] == above["generation-plot"]["trials"] == "scattergl"
+    assert "box" in set(above["parameter-plot"].values())
     assert page.errors == []
 
 
