@@ -7,11 +7,18 @@ service limits, the bytes of a mesh), so schema-valid requests are rightly refus
 Everything else runs: no 5xx, documented status codes, content types and response schemas, and
 schema-invalid requests rejected.
 
-Runs on SQLite with a seeded, finished study so that some generated ids exist; the number of
-examples per operation is bounded to keep the whole file under half a minute.
+Runs twice, each time with a seeded, finished study so that some generated ids exist: in process
+on SQLite (ASGI), and over HTTP against a live server (uvicorn on a port) on PostgreSQL, where
+``Infinity`` in a number column and NUL bytes in a path once answered 500. The number of examples
+per operation is bounded to keep each run under a minute.
 """
 
 from __future__ import annotations
+
+import socket
+import threading
+import time
+from pathlib import Path
 
 import pytest
 import schemathesis
@@ -29,15 +36,13 @@ from api.store import SqlStore
 from optimizer.driver import Driver
 from optimizer.memory import SyntheticExecutor
 from optimizer.study import StudyDefinition
-from tests.api.conftest import study_definition
+from tests.api.conftest import _empty_postgres, study_definition
 
 EXAMPLES_PER_OPERATION = 8
 
 
-@pytest.fixture(scope="module")
-def fuzzed_app(tmp_path_factory):
-    path = tmp_path_factory.mktemp("fuzz") / "fuzz.db"
-    url = f"sqlite:///{path}"
+def _seeded_app(url: str, data_dir: Path):
+    """The app on a migrated database holding one finished study; returns (app, engine, token)."""
     upgrade_database(url)
     engine = create_db_engine(url)
     store = SqlStore(engine)
@@ -49,18 +54,52 @@ def fuzzed_app(tmp_path_factory):
     with store.session() as session:
         _, token = create_key(session, "fuzzer")
     settings_ = load_settings(
-        database_url=url, data_dir=path.parent / "data", max_request_bytes=64_000, max_upload_bytes=100_000
+        database_url=url, data_dir=data_dir, max_request_bytes=64_000, max_upload_bytes=100_000
     )
-    app = create_app(settings_, engine=engine)
+    return create_app(settings_, engine=engine), engine, token
+
+
+@pytest.fixture(scope="module")
+def fuzzed_app(tmp_path_factory):
+    path = tmp_path_factory.mktemp("fuzz") / "fuzz.db"
+    app, engine, token = _seeded_app(f"sqlite:///{path}", path.parent / "data")
     yield app, token
     engine.dispose()
 
 
 @pytest.fixture(scope="module")
+def live_postgres_server(tmp_path_factory, postgres_url):
+    """The app on the session's PostgreSQL database, served by uvicorn on a free port; yields
+    (base URL, token) while it listens."""
+    import uvicorn
+
+    _empty_postgres(postgres_url)
+    app, engine, token = _seeded_app(postgres_url, tmp_path_factory.mktemp("fuzz-pg") / "data")
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            pytest.fail("uvicorn did not start within 30 s")
+        time.sleep(0.05)
+    yield f"http://127.0.0.1:{port}", token
+    server.should_exit = True
+    thread.join(timeout=10)
+    engine.dispose()
+
+
+# The dashboard's TOML upload has no JSON body to generate; its own tests cover it.
+NOT_FUZZED = "^/dashboard/"
+
+
+@pytest.fixture(scope="module")
 def api_schema(fuzzed_app):
     app, _ = fuzzed_app
-    # The dashboard's TOML upload has no JSON body to generate; its own tests cover it.
-    return schemathesis.openapi.from_asgi("/openapi.json", app).exclude(path_regex="^/dashboard/")
+    return schemathesis.openapi.from_asgi("/openapi.json", app).exclude(path_regex=NOT_FUZZED)
 
 
 @pytest.fixture(scope="module")
@@ -94,6 +133,19 @@ def _has_inputs(operation) -> bool:
 @pytest.mark.parametrize("mode", [GenerationMode.POSITIVE, GenerationMode.NEGATIVE], ids=["valid", "invalid"])
 def test_no_request_gets_a_500_or_breaks_the_schema(api_schema, token, mode):
     operations = [result.ok() for result in api_schema.get_all_operations()]
+
+    for operation in operations:
+        _fuzz(operation, mode, {"Authorization": f"Bearer {token}"})
+
+    assert len(operations) >= 20
+
+
+@pytest.mark.postgres
+@pytest.mark.parametrize("mode", [GenerationMode.POSITIVE, GenerationMode.NEGATIVE], ids=["valid", "invalid"])
+def test_a_live_server_on_postgresql_answers_no_request_with_a_500(live_postgres_server, mode):
+    base_url, token = live_postgres_server
+    schema = schemathesis.openapi.from_url(f"{base_url}/openapi.json").exclude(path_regex=NOT_FUZZED)
+    operations = [result.ok() for result in schema.get_all_operations()]
 
     for operation in operations:
         _fuzz(operation, mode, {"Authorization": f"Bearer {token}"})
