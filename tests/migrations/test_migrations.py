@@ -3,6 +3,9 @@ refuses a database that is not at the newest revision; ``demcal db upgrade`` app
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import pytest
 import sqlalchemy as sa
 from alembic.autogenerate import compare_metadata
@@ -94,6 +97,10 @@ def test_db_upgrade_command_migrates_the_configured_database(tmp_path, monkeypat
     assert before.exit_code == 1 and "demcal db upgrade" in before.output
     assert upgraded.exit_code == 0, upgraded.output
     assert after.exit_code == 0 and "up to date" in after.output
+    # The README quotes what it prints, and must keep up with new migrations.
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    quoted = re.search(r'demcal db current +# "([^"]+)"', readme).group(1)
+    assert quoted == after.output.strip()
     engine = create_db_engine(url)
     check_schema_current(engine)
     engine.dispose()
