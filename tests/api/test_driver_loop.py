@@ -112,6 +112,28 @@ def test_cancel_frees_the_local_pool_at_once_for_the_next_study(store):
         executor.close()
 
 
+@pytest.mark.slow
+def test_a_trial_a_worker_started_shows_running_at_the_next_tick_not_the_next_scan(store):
+    from worker.local import LocalPoolExecutor
+
+    executor = LocalPoolExecutor(workers=1)
+    try:
+        small = {"measured": [1]}, {"population": 2, "generations": 0}
+        study_id = create(store, scenario=LONG_SCENARIO, experiment=small[0], ga=small[1])
+        # A scan (lease bookkeeping) only at the first tick: showing a trial running must not wait for one.
+        loop = DriverLoop(store, executor, DatabaseLeases(store, "test"), poll_s=0.05, scan_every_s=3600.0)
+        tick_until(loop, lambda: bool(executor.running()))
+        started = dict(executor.running())
+
+        loop.tick()
+
+        running = {t.spec.trial_id: t for t in store.trials(study_id, [TrialState.RUNNING])}
+        assert set(started) <= set(running)
+        assert all(running[trial].worker == worker for trial, worker in started.items())
+    finally:
+        executor.close()
+
+
 def test_a_poll_reads_only_the_trials_written_since_the_last_and_never_a_simulation_per_result(store, engine):
     import sqlalchemy as sa
 
