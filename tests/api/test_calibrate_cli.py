@@ -197,6 +197,27 @@ def test_ctrl_c_then_resume_gives_the_trials_and_results_of_an_uninterrupted_run
 
 
 
+def test_sigterm_pauses_the_study_and_frees_it_so_no_serve_takes_it_over(tmp_path):
+    from api.store.leases import DatabaseLeases
+    from optimizer.protocols import StudyStatus
+
+    write_study(tmp_path, population=4, vibration_time=1.0)
+    process = demcal(["calibrate", "study.toml", "--workers", "1"], tmp_path)
+    try:
+        wait_for_a_result(tmp_path)
+    finally:
+        process.send_signal(signal.SIGTERM)
+    output = finish(process, 60)
+    store = store_for(tmp_path)
+    study_id = next(word for word in output.split() if word.startswith("st-"))
+
+    study = store.load_study(study_id)
+    assert process.returncode == 130, output
+    assert study.status is StudyStatus.PAUSED  # a serve scans active studies only: not this one
+    assert f"demcal calibrate --resume {study_id}" in study.message
+    assert DatabaseLeases(store, "serve-elsewhere").acquire(study_id)  # the lease was released
+
+
 def test_validation_seeds_beyond_the_budget_exit_2_saying_what_fits(embedded, tmp_path):
     (tmp_path / "study.toml").write_text(
         "budget = 200\n[scenario]\n[experiment]\nmeasured = [1]\n[validation]\nseeds = 20\n"
