@@ -16,6 +16,7 @@ import threading
 
 from api.auth import Principal
 from api.schemas import IdentifiabilityRead, StudyProgressRead
+from api.services.offload import in_child
 from api.services.views import StudyViewCache
 from api.store import SqlStore
 from optimizer.identifiability import study_identifiability
@@ -59,16 +60,17 @@ def identifiability_json(
     store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal
 ) -> bytes:
     study = store.study_version(study_id, principal.visible_to)
-
-    def build() -> bytes:
-        definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
-        evaluations = evaluate(store.trials(study_id), definition, definition.n_items())
-        space = ParameterSpace(definition.parameters)
-        result = study_identifiability(evaluations, definition, space)
-        return IdentifiabilityRead(study_id=study_id, **result).model_dump_json().encode()
-
     # Once per completed batch (and status), not per change of the study row (a batch queued,
-    # then saved, changes it twice): a build reads and evaluates every trial and fits a Gaussian
-    # process, seconds of CPU for a long study (benchmarks/README.md).
+    # then saved, changes it twice), in the low-priority child process (``offload``): a build
+    # reads and evaluates every trial and fits a Gaussian process, seconds of CPU for a long study.
     version = (study.generation, study.status)
+    build = lambda: in_child(_identifiability, store, study_id)  # noqa: E731 - one line, one use
     return views.get_or_build("identifiability", study_id, version, build, stale_ok=True)
+
+
+def _identifiability(store: SqlStore, study_id: str) -> bytes:
+    definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
+    evaluations = evaluate(store.trials(study_id), definition, definition.n_items())
+    space = ParameterSpace(definition.parameters)
+    result = study_identifiability(evaluations, definition, space)
+    return IdentifiabilityRead(study_id=study_id, **result).model_dump_json().encode()
