@@ -6,6 +6,7 @@ from the form."""
 from __future__ import annotations
 
 import re
+import statistics
 from collections import Counter
 from pathlib import Path
 
@@ -183,8 +184,14 @@ def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dash
 
     target = next(t for t in traces if t["name"].startswith("experimental target"))
     medians = [t for t in traces if t["name"] == "median per generation"]
+    measured: dict[int, list[int]] = {}
+    for record in dashboard.store.trials(dashboard.study.study_id):
+        if record.result is not None and record.result.ok:
+            measured.setdefault(record.spec.generation, []).append(record.result.n_remaining)
     assert set(target["y"]) == {dashboard.study.target}
     assert [len(m["x"]) for m in medians] == [5, 5]  # generations 0..4, for N_t and for T
+    assert sorted(measured) == medians[0]["x"] == list(range(5))
+    assert medians[0]["y"] == [statistics.median(measured[g]) for g in range(5)]
 
 
 def test_clicking_a_pareto_point_opens_its_trial(page, dashboard):
