@@ -37,7 +37,7 @@ from dem.conf import JIT_FLAGS
 from dem.contact import PairLaw, patch_damping, share_weight, sphere_contact_force
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
-from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_GROUPS, N_PAIRS
+from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS
 from dem.rounded_contact import facet_geometry, pair_geometry
 
 
@@ -138,8 +138,16 @@ def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_lim
 
 @numba.njit(**JIT_FLAGS)
 def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
-    """Sphere-sphere contacts: geometry and the overlap sum of each body pair, then forces.
-    Returns (contacts carrying force, offending body or -1)."""
+    """Sphere-sphere contacts. Returns (contacts carrying force, offending body or -1).
+
+    A body pair with one listed sphere pair (two plain spheres: every pair of a sphere packing)
+    carries its whole law (weight ``share_weight(delta) / share_weight(delta)`` = 1), so its force
+    is applied in the first pass over the list. The others need their group's overlap sum first:
+    the first pass keeps their geometry and the sum, the second applies their forces (skipped
+    when there are none). One pass over the list per step is what keeps a large packing's cost
+    per pair flat once its lists no longer fit the cache. ``delta`` is kept for every pair (-1
+    when apart): ``Simulation.current_overlap`` reads it.
+    """
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
     rounding, core_count = spheres.rounding, spheres.core_count
     active, pos, vel, omega, force, torque = (
@@ -153,11 +161,15 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
     pp_i, pp_j, pp_hist, pp_group = pairs.i, pairs.j, pairs.hist, pairs.group
     pp_delta, pp_n, grp_sum, grp_law = pairs.delta, pairs.normal, pairs.group_sum, pairs.group_law
     n_contacts = 0
+    n_deferred = 0
     n_pp = pairs.count[N_PAIRS]
-    for g in range(pairs.count[N_GROUPS]):
-        grp_sum[g] = 0.0
     for p in range(n_pp):
         i, j = pp_i[p], pp_j[p]
+        g = pp_group[p]
+        first = p == 0 or pp_group[p - 1] != g
+        single = first and (p == n_pp - 1 or pp_group[p + 1] != g)
+        if first:
+            grp_sum[g] = 0.0
         pp_delta[p] = -1.0
         if not (active[sbody[i]] and active[sbody[j]]):
             continue
@@ -165,7 +177,9 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         d2 = dx * dx + dy * dy + dz * dz
         rs = radius[i] + radius[j]
         if d2 >= rs * rs:
-            pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
+            # Only a spring that held something is reset: untouched memory stays clean.
+            if pp_hist[p, 0] != 0.0 or pp_hist[p, 1] != 0.0 or pp_hist[p, 2] != 0.0:
+                pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
             continue
         if core_count[i] > 0 or core_count[j] > 0:
             delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww = _rounded_pair(
@@ -185,50 +199,83 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
             pairs.point[p, 1] = cy + shift * ny
             pairs.point[p, 2] = cz + shift * nz
             pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2] = s_uu, s_uw, s_ww
-            grp_sum[pp_group[p]] += share_weight(delta)
+            grp_sum[g] += share_weight(delta)
+            n_deferred += 1
             continue
         d = math.sqrt(d2)
         delta = rs - d
         if delta > lim * min(radius[i], radius[j]) or d == 0.0:
             return n_contacts, sbody[i]
+        nx, ny, nz = dx / d, dy / d, dz / d
         pp_delta[p] = delta
-        pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = dx / d, dy / d, dz / d
-        grp_sum[pp_group[p]] += share_weight(delta)
+        if single:
+            _sphere_pair_force(p, i, j, g, nx, ny, nz, delta, 1.0, bodies, spheres, pairs, hist_dt)
+            n_contacts += 1
+            continue
+        pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = nx, ny, nz
+        grp_sum[g] += share_weight(delta)
+        n_deferred += 1
+    if n_deferred == 0:
+        return n_contacts, -1
     for p in range(n_pp):
         delta = pp_delta[p]
         if delta <= 0.0:
             continue
         i, j = pp_i[p], pp_j[p]
-        ba, bb = sbody[i], sbody[j]
-        nx, ny, nz = pp_n[p, 0], pp_n[p, 1], pp_n[p, 2]
+        g = pp_group[p]
         rounded = core_count[i] > 0 or core_count[j] > 0
-        if rounded:
-            cx, cy, cz = pairs.point[p, 0], pairs.point[p, 1], pairs.point[p, 2]
-        else:
-            reach = radius[j] - 0.5 * delta
-            cx, cy, cz = x[j, 0] + nx * reach, x[j, 1] + ny * reach, x[j, 2] + nz * reach
+        single = (p == 0 or pp_group[p - 1] != g) and (p == n_pp - 1 or pp_group[p + 1] != g)
+        if single and not rounded:
+            continue  # done in the first pass
+        nx, ny, nz = pp_n[p, 0], pp_n[p, 1], pp_n[p, 2]
+        weight = share_weight(delta) / grp_sum[g]
+        if not rounded:
+            _sphere_pair_force(p, i, j, g, nx, ny, nz, delta, weight, bodies, spheres, pairs, hist_dt)
+            n_contacts += 1
+            continue
+        ba, bb = sbody[i], sbody[j]
+        cx, cy, cz = pairs.point[p, 0], pairs.point[p, 1], pairs.point[p, 2]
         rax, ray, raz = cx - pos[ba, 0], cy - pos[ba, 1], cz - pos[ba, 2]
         rbx, rby, rbz = cx - pos[bb, 0], cy - pos[bb, 1], cz - pos[bb, 2]
         vax, vay, vaz = _point_velocity(vel, omega, ba, rax, ray, raz)
         vbx, vby, vbz = _point_velocity(vel, omega, bb, rbx, rby, rbz)
-        g = pp_group[p]
-        weight = share_weight(delta) / grp_sum[g]
         law = _group_law(grp_law, g)
         fx, fy, fz, f_n = sphere_contact_force(
             (nx, ny, nz), delta, (vax - vbx, vay - vby, vaz - vbz), weight, law, pp_hist, p, hist_dt
         )
         _push(force, torque, ba, fx, fy, fz, rax, ray, raz)
         _push(force, torque, bb, -fx, -fy, -fz, rbx, rby, rbz)
-        if rounded:
-            moment = (pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2])
-            spin = (omega[ba, 0] - omega[bb, 0], omega[ba, 1] - omega[bb, 1], omega[ba, 2] - omega[bb, 2])
-            tx, ty, tz = patch_damping(
-                (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * f_n
-            )
-            _twist(torque, ba, tx, ty, tz)
-            _twist(torque, bb, -tx, -ty, -tz)
+        moment = (pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2])
+        spin = (omega[ba, 0] - omega[bb, 0], omega[ba, 1] - omega[bb, 1], omega[ba, 2] - omega[bb, 2])
+        tx, ty, tz = patch_damping(
+            (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * f_n
+        )
+        _twist(torque, ba, tx, ty, tz)
+        _twist(torque, bb, -tx, -ty, -tz)
         n_contacts += 1
     return n_contacts, -1
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _sphere_pair_force(p, i, j, g, nx, ny, nz, delta, weight, bodies, spheres, pairs, hist_dt):
+    """Applies the force of listed pair p, two plain spheres i and j of group g touching with
+    overlap ``delta`` along n (j -> i) and ``weight`` of their body pair's law, at the middle of
+    the overlap. Inlined: its three containers would cost more to pass than the force itself."""
+    x, radius, sbody = spheres.x, spheres.radius, spheres.body
+    pos, vel, omega, force, torque = bodies.pos, bodies.vel, bodies.omega, bodies.force, bodies.torque
+    ba, bb = sbody[i], sbody[j]
+    reach = radius[j] - 0.5 * delta
+    cx, cy, cz = x[j, 0] + nx * reach, x[j, 1] + ny * reach, x[j, 2] + nz * reach
+    rax, ray, raz = cx - pos[ba, 0], cy - pos[ba, 1], cz - pos[ba, 2]
+    rbx, rby, rbz = cx - pos[bb, 0], cy - pos[bb, 1], cz - pos[bb, 2]
+    vax, vay, vaz = _point_velocity(vel, omega, ba, rax, ray, raz)
+    vbx, vby, vbz = _point_velocity(vel, omega, bb, rbx, rby, rbz)
+    law = _group_law(pairs.group_law, g)
+    fx, fy, fz, _ = sphere_contact_force(
+        (nx, ny, nz), delta, (vax - vbx, vay - vby, vaz - vbz), weight, law, pairs.hist, p, hist_dt
+    )
+    _push(force, torque, ba, fx, fy, fz, rax, ray, raz)
+    _push(force, torque, bb, -fx, -fy, -fz, rbx, rby, rbz)
 
 
 @numba.njit(**JIT_FLAGS)
