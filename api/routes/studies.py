@@ -3,9 +3,10 @@ front, per-generation summary, recommendation, exports). Thin handlers over ``ap
 
 from __future__ import annotations
 
+import hashlib
 from typing import Annotated
 
-from fastapi import APIRouter, Query, Response, status
+from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import StreamingResponse
 
 from api.deps import ApiKeyDep, Limit, Offset, SettingsDep, StoreDep, StudyViewsDep
@@ -23,6 +24,17 @@ from optimizer.protocols import StudyStatus
 from optimizer.study import StudyDefinition
 
 router = APIRouter(prefix="/api/v1/studies", tags=["studies"])
+
+
+def cached_json(request: Request, body: bytes) -> Response:
+    """A polled view's JSON with an ETag (its content's hash) and ``Cache-Control: no-cache``, so
+    that a browser asks again each time with ``If-None-Match`` and an unchanged view comes back as
+    an empty 304 instead of its bytes (the dashboard's fetch does this by itself)."""
+    tag = f'"{hashlib.blake2b(body, digest_size=16).hexdigest()}"'
+    headers = {"ETag": tag, "Cache-Control": "no-cache"}
+    if tag in request.headers.get("if-none-match", ""):
+        return Response(status_code=status.HTTP_304_NOT_MODIFIED, headers=headers)
+    return Response(body, media_type="application/json", headers=headers)
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=StudyRead)
 def create_study(definition: StudyDefinition, principal: ApiKeyDep, store: StoreDep, settings: SettingsDep):
@@ -42,9 +54,11 @@ def list_studies(
 
 
 @router.get("/{study_id}", response_model=StudyRead)
-def get_study(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
+def get_study(
+    study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
+):
     """A study with its progress (trials done / total, generation) and best trial so far."""
-    return Response(studies.study_json(store, views, study_id, principal), media_type="application/json")
+    return cached_json(request, studies.study_json(store, views, study_id, principal))
 
 
 @router.post("/{study_id}/pause", response_model=StudyRead)
@@ -68,10 +82,11 @@ def delete_study(study_id: str, principal: ApiKeyDep, store: StoreDep):
 
 
 @router.get("/{study_id}/pareto", response_model=ParetoFront)
-def pareto_front(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
+def pareto_front(
+    study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
+):
     """The current Pareto front (f1 = |N_t - target|, f2 = computation time), best f1 first."""
-    body = trials.pareto_front_json(store, views, study_id, principal)
-    return Response(body, media_type="application/json")
+    return cached_json(request, trials.pareto_front_json(store, views, study_id, principal))
 
 
 @router.get("/{study_id}/generations", response_model=list[GenerationSummary])
@@ -81,23 +96,27 @@ def generation_summary(study_id: str, principal: ApiKeyDep, store: StoreDep):
 
 
 @router.get("/{study_id}/progress", response_model=StudyProgressRead)
-def study_progress(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
+def study_progress(
+    study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
+):
     """Hypervolume, best f1 and best validated f1 against simulations, one point per completed batch."""
-    return Response(progress.progress_json(store, views, study_id, principal), media_type="application/json")
+    return cached_json(request, progress.progress_json(store, views, study_id, principal))
 
 
 @router.get("/{study_id}/identifiability", response_model=IdentifiabilityRead)
-def identifiability(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
+def identifiability(
+    study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
+):
     """Which searched parameters the experiment pins down, from the spread of the matching sets."""
-    body = progress.identifiability_json(store, views, study_id, principal)
-    return Response(body, media_type="application/json")
+    return cached_json(request, progress.identifiability_json(store, views, study_id, principal))
 
 
 @router.get("/{study_id}/recommendation", response_model=RecommendationRead)
-def recommendation(study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep):
+def recommendation(
+    study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
+):
     """The recommended parameter set and every other set that matches the experiment as well."""
-    body = trials.recommendation_json(store, views, study_id, principal)
-    return Response(body, media_type="application/json")
+    return cached_json(request, trials.recommendation_json(store, views, study_id, principal))
 
 
 @router.get(

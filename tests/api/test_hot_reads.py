@@ -261,3 +261,17 @@ def test_each_dashboard_poll_costs_one_query_and_the_study_read_follows_every_tr
     assert seen[2]["failures"] == seen[0]["failures"]
     assert [item["id"] for item in changed["items"]] == [new.trial_id] and changed["total"] == 1
 
+
+
+def test_an_unchanged_polled_view_answers_304_to_the_etag_it_sent(client, keys, store):
+    study_id = _run(store)
+    url = f"/api/v1/studies/{study_id}"
+
+    first = client.get(url, headers=keys.auth())
+    again = client.get(url, headers={**keys.auth(), "If-None-Match": first.headers["etag"]})
+    store.transition(study_id, [StudyStatus.DONE], StudyStatus.DONE)  # any change to the study row
+    changed = client.get(url, headers={**keys.auth(), "If-None-Match": first.headers["etag"]})
+
+    assert first.status_code == 200 and first.headers["cache-control"] == "no-cache"
+    assert again.status_code == 304 and again.content == b""
+    assert changed.status_code == 200 and changed.json()["updated_at"] != first.json()["updated_at"]
