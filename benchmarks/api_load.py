@@ -17,7 +17,8 @@ Goal: p99 under 50 ms.
 
 ``--dashboard`` makes each client poll what the study page polls (``api/dashboard/static/
 study.js``): the study, the trials changed since its last poll (``updated_since``), and, when
-something changed, the recommendation, progress and identifiability. ``--results-per-s`` stands
+something changed, the recommendation, progress and identifiability, revalidating what it has
+with the ETags it was sent as the browser does (304 when unchanged). ``--results-per-s`` stands
 for running workers: a writer process adds and finishes that many trials a second through the
 store, so every poll sees changes and every per-study cache is invalidated as in production.
 Goal (issue 14): p99 under 100 ms with 50 clients polling every second while workers run.
@@ -233,33 +234,45 @@ async def load(
     kinds = ["study", "trials", "recommendation", "progress", "identifiability"] if dashboard else [
         "pareto", "trials"]
     latencies: dict[str, list[float]] = {kind: [] for kind in kinds}
-    errors = 0
+    errors = not_modified = 0
     limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
 
-    async def timed(client: httpx.AsyncClient, kind: str, path: str, params=None) -> dict | None:
+    async def timed(client: httpx.AsyncClient, kind: str, path: str, params=None, cache=None) -> dict | None:
         """One timed GET; its JSON, or None (counted as an error) for a failed request: a keep-alive
-        connection the server closed while the client was thinking is retried once by httpx only."""
-        nonlocal errors
+        connection the server closed while the client was thinking is retried once by httpx only.
+        With ``cache`` (a page's), it revalidates what it has as a browser does: If-None-Match with
+        the ETag it was sent, and a 304 means the cached body."""
+        nonlocal errors, not_modified
         start = time.perf_counter()
+        sent = dict(headers)
+        if cache is not None and path in cache:
+            sent["If-None-Match"] = cache[path][0]
         try:
-            response = await client.get(path, params=params, headers=headers)
+            response = await client.get(path, params=params, headers=sent)
         except httpx.TransportError:
             errors += 1
             return None
         latencies[kind].append(time.perf_counter() - start)
+        if response.status_code == 304 and cache is not None and path in cache:
+            not_modified += 1
+            return cache[path][1]
         if response.status_code != 200:
             errors += 1
             return None
-        return response.json()
+        body = response.json()
+        if cache is not None and "etag" in response.headers:
+            cache[path] = (response.headers["etag"], body)
+        return body
 
     async def dashboard_loop(index: int, client: httpx.AsyncClient, stop: float) -> None:
         rng = random.Random(index)
+        cache: dict[str, tuple[str, dict]] = {}  # the browser's HTTP cache of this page
         study = f"/api/v1/studies/{study_id}"
         # A page already open: its first full load is done, it polls for changes from now on.
         cursor = None
         await asyncio.sleep(think * rng.uniform(0, 1))
         while time.monotonic() < stop:
-            await timed(client, "study", study)
+            await timed(client, "study", study, cache=cache)
             query = {"limit": 5000, "offset": 0} if cursor is None else {
                 "limit": 5000, "offset": 0, "updated_since": cursor}
             page = await timed(client, "trials", f"{study}/trials", query if cursor else {"limit": 1})
@@ -268,9 +281,9 @@ async def load(
             changed, cursor = cursor is not None and page["items"], page["server_time"]
             if changed:
                 await asyncio.gather(
-                    timed(client, "recommendation", f"{study}/recommendation"),
-                    timed(client, "progress", f"{study}/progress"),
-                    timed(client, "identifiability", f"{study}/identifiability"),
+                    timed(client, "recommendation", f"{study}/recommendation", cache=cache),
+                    timed(client, "progress", f"{study}/progress", cache=cache),
+                    timed(client, "identifiability", f"{study}/identifiability", cache=cache),
                 )
             await asyncio.sleep(think * rng.uniform(0.5, 1.5))
 
@@ -310,7 +323,8 @@ async def load(
         await asyncio.gather(*(client_loop(i, client, stop) for i in range(clients)))
         elapsed = time.monotonic() - started
         after = (await client.get("/bench/stats")).json()
-    return {"latencies": latencies, "elapsed": elapsed, "errors": errors, "server": _spent(before, after)}
+    return {"latencies": latencies, "elapsed": elapsed, "errors": errors, "not_modified": not_modified,
+            "server": _spent(before, after)}
 
 
 def _spent(before: dict, after: dict) -> dict:
@@ -401,7 +415,8 @@ def main() -> None:
             f"  {kind:7s} n={len(values):6d}  p50={_percentile(values, 50) * 1000:7.1f} ms  "
             f"p99={_percentile(values, 99) * 1000:7.1f} ms"
         )
-    print(f"  throughput {len(everything) / result['elapsed']:.0f} req/s, errors {result['errors']}")
+    print(f"  throughput {len(everything) / result['elapsed']:.0f} req/s, errors {result['errors']}, "
+          f"304 not modified {result['not_modified']}")
     server = result["server"]
     requests = sum(server["requests"].values())
     per_kind = ", ".join(
