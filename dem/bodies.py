@@ -53,6 +53,7 @@ class SphereArrays(NamedTuple):
     rounding: np.ndarray  # (n,) r of a polyhedron piece; a sphere's radius
     core_start: np.ndarray  # (n,) int64 first core vertex of a piece
     core_count: np.ndarray  # (n,) int64 its number of core vertices; 0 for a clump's sphere
+    crown: np.ndarray  # (n, 3) a piece's crown (dem.polyhedra.Polyhedron.crown); 0 for a sphere
     core: np.ndarray  # (m, 3) every piece's core vertices, body frame
     eye: np.ndarray  # (3, 3) identity: the rotation of points given in world coordinates
     zero: np.ndarray  # (3,)
@@ -118,8 +119,8 @@ class Bodies:
 
 
 def sphere_rows(shape: Clump | Polyhedron):
-    """(radius, offset, rounding, core_start, core_count) of a shape's sphere rows; core_start is
-    relative to the shape's own ``core``."""
+    """(radius, offset, rounding, core_start, core_count, crown) of a shape's sphere rows;
+    core_start is relative to the shape's own ``core``."""
     if isinstance(shape, Polyhedron):
         n = shape.n_pieces
         return (
@@ -128,17 +129,19 @@ def sphere_rows(shape: Clump | Polyhedron):
             np.full(n, shape.rounding),
             np.asarray(shape.piece_start, dtype=np.int64),
             np.asarray(shape.piece_count, dtype=np.int64),
+            np.array([shape.crown(k) for k in range(n)]).reshape(n, 3),
         )
     n = shape.n_spheres
     radius = np.asarray(shape.radius, dtype=np.float64)
-    return radius, np.asarray(shape.offset), radius, np.zeros(n, np.int64), np.zeros(n, np.int64)
+    zero = np.zeros(n, np.int64)
+    return radius, np.asarray(shape.offset), radius, zero, zero, np.zeros((n, 3))
 
 
 class Spheres:
     """Per-sphere arrays: owning body, radius, body-frame offset, world position, and for the
     pieces of rounded polyhedra their rounding and core vertices."""
 
-    _ARRAYS = ("_body", "_radius", "_offset", "_x", "_rounding", "_core_start", "_core_count")
+    _ARRAYS = ("_body", "_radius", "_offset", "_x", "_rounding", "_core_start", "_core_count", "_crown")
 
     def __init__(self) -> None:
         self.n = 0
@@ -149,6 +152,7 @@ class Spheres:
         self._rounding = np.zeros(0)
         self._core_start = np.zeros(0, dtype=np.int64)
         self._core_count = np.zeros(0, dtype=np.int64)
+        self._crown = np.zeros((0, 3))
         self._core = np.zeros((1, 3))  # one dummy row: never empty
         self._n_core = 0
         self._eye, self._zero, self._work = np.eye(3), np.zeros(3), scratch()
@@ -187,6 +191,7 @@ class Spheres:
             self.rounding,
             self._core_start[: self.n],
             self.core_count,
+            self._crown[: self.n],
             self._core,
             self._eye,
             self._zero,
@@ -194,7 +199,7 @@ class Spheres:
         )
 
     def append(self, body: int, shape: Clump | Polyhedron, rot: np.ndarray, position: np.ndarray) -> int:
-        radius, offset, rounding, core_start, core_count = sphere_rows(shape)
+        radius, offset, rounding, core_start, core_count, crown = sphere_rows(shape)
         k = len(radius)
         if self.n + k > len(self._radius):
             capacity = max(64, 2 * (self.n + k))
@@ -210,6 +215,7 @@ class Spheres:
         self._x[start : start + k] = position + offset @ rot.T
         self._rounding[start : start + k] = rounding
         self._core_count[start : start + k] = core_count
+        self._crown[start : start + k] = crown
         if isinstance(shape, Polyhedron):
             vertices = np.asarray(shape.core, dtype=np.float64)
             if self._n_core + len(vertices) > len(self._core):

@@ -258,8 +258,8 @@ def sphere_contact_force(n, delta, v, weight, law, hist, h, hist_dt):
 def patch_damping(n, moment, omega, c_n, c_t, max_spin):
     """Torque on the first partner of a face contact from the dampers spread over its patch.
 
-    A rounded polyhedron's face contact is one force at the patch's centre of pressure
-    (``dem/convex.py``), whose normal damper cannot resist rocking or spinning about that
+    A rounded polyhedron's face contact is one force at one point (``dem/crown.py``), whose
+    normal damper cannot resist rocking or spinning about that
     point. The law's dampers belong to the whole patch (a Winkler foundation): normal dampers of
     total ``c_n`` spread over it resist the relative rocking ``omega`` with ``-c_n M omega``,
     ``M = s_ww u u^T - s_uw (u w^T + w u^T) + s_uu w w^T`` from the patch's second moments per unit

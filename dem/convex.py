@@ -14,13 +14,11 @@ of their cores:
   theorem), so that force applied at a point on the line through the closest points does the
   work ``-dU`` of ``U = K delta^2 / 2``: the law is conservative.
 * Where the closest points are not unique (two faces parallel, an edge parallel to a face, two
-  parallel edges) any point of the set of closest points is such a point. ``contact_patch``
-  places the force at the centre of pressure of the patch where the rounded surfaces overlap
-  (depth varying linearly over it): the centroid of two parallel faces' overlap, so a box landing
-  flat feels no torque, moving continuously to the lower edge as the face tilts by the overlap
-  over its width. Only inside that band (tilts below delta / width) does the point differ from
-  the closest point: it gives a resting face its rocking stiffness, where a point jumping between
-  corners would rock for ever.
+  parallel edges) they jump between corners as a face rocks, which is not smooth: the contact
+  is then taken between crowned cores (``dem/crown.py``), whose unique contact point moves
+  continuously across the face. ``contact_patch`` gives the patch where the rounded surfaces
+  overlap (depth varying linearly over it): its second moments spread the dampers over a face
+  (``dem.contact.patch_damping``) and its loads weigh the triangles of a facet.
 
 Pure numba functions; the scratch array ``work`` (4, MAX_FEATURE, 3) keeps them free of
 allocation.
@@ -477,6 +475,25 @@ def plane_basis(nx, ny, nz):
 
 
 @numba.njit(**JIT_FLAGS)
+def feature_hulls(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, d, nx, ny, nz, tol, work):
+    """Projected hulls of the vertices of A and B within tol of their supporting planes across
+    the unit normal n (B to A) of cores a distance d apart, in ``plane_basis(n)``, column 2
+    ``tol - height``: A's in work[0], B's in work[1]; returns their sizes and the length under
+    which points merge."""
+    ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
+    na = _feature(va, sa, ca, rot_a, pa, nx, ny, nz, ux, uy, uz, wx, wy, wz, -1.0, tol, work[0])
+    nb = _feature(vb, sb, cb, rot_b, pb, nx, ny, nz, ux, uy, uz, wx, wy, wz, 1.0, tol, work[1])
+    eps = 1e-9 * d + 1e-12 * (tol + 1.0)
+    ha = _hull2(work[0], na, work[2], eps)
+    for a in range(ha):
+        _copy_row(work[0], a, work[2], a)
+    hb = _hull2(work[1], nb, work[2], eps)
+    for a in range(hb):
+        _copy_row(work[1], a, work[2], a)
+    return ha, hb, eps
+
+
+@numba.njit(**JIT_FLAGS)
 def contact_patch(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, ax, ay, az, bx, by, bz, tol, work):
     """Centre of the contact patch of two separated convex shapes whose closest points (from
     ``gjk_distance``) are a and b, for the overlap ``tol`` of their rounded surfaces: returns
@@ -496,15 +513,7 @@ def contact_patch(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, ax, ay, az, bx, 
         return 0.0, 0.0, mx, my, mz, 0.0, 0.0, 0.0
     nx, ny, nz = nx / d, ny / d, nz / d
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
-    na = _feature(va, sa, ca, rot_a, pa, nx, ny, nz, ux, uy, uz, wx, wy, wz, -1.0, tol, work[0])
-    nb = _feature(vb, sb, cb, rot_b, pb, nx, ny, nz, ux, uy, uz, wx, wy, wz, 1.0, tol, work[1])
-    eps = 1e-9 * d + 1e-12 * (tol + 1.0)
-    ha = _hull2(work[0], na, work[2], eps)
-    for a in range(ha):
-        _copy_row(work[0], a, work[2], a)
-    hb = _hull2(work[1], nb, work[2], eps)
-    for a in range(hb):
-        _copy_row(work[1], a, work[2], a)
+    ha, hb, eps = feature_hulls(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, d, nx, ny, nz, tol, work)
     # Clip the lower-dimensional feature by the other (a polygon clips anything).
     if hb >= 3:
         m = _clip(work[0], ha, work[1], hb, work[3])

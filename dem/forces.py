@@ -293,7 +293,10 @@ def _rounded_pair(i, j, bodies, spheres, axis):
     else:
         vb, sb, cb, rot_b, pb = spheres.x, j, 1, spheres.eye, spheres.zero
     ra, rb = spheres.rounding[i], spheres.rounding[j]
-    return pair_geometry(va, sa, ca, rot_a, pa, ra, vb, sb, cb, rot_b, pb, rb, axis, spheres.work)
+    crown_a, crown_b = spheres.crown[i], spheres.crown[j]
+    return pair_geometry(
+        va, sa, ca, rot_a, pa, ra, crown_a, vb, sb, cb, rot_b, pb, rb, crown_b, axis, spheres.work
+    )
 
 
 @numba.njit(**JIT_FLAGS)
@@ -339,6 +342,7 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                 bodies.rot[b],
                 pos[b],
                 spheres.rounding[i],
+                spheres.crown[i],
                 tri_flat,
                 facets.tri_start[f],
                 facets.tri_count[f],
@@ -346,6 +350,7 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                 facets.normal[f],
                 facets.offset[f],
                 spheres.eye,
+                spheres.zero,
                 spheres.work,
             )
             if delta <= 0.0:

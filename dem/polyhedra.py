@@ -23,12 +23,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
-from scipy.spatial import ConvexHull, HalfspaceIntersection
+from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from dem.mesh import MeshError, mass_properties
 
 ROUNDING_FRACTION = 0.25  # default r as a fraction of a piece's thinnest dimension
 MAX_CORE_VERTICES = 48  # a core with more vertices is simplified (support queries cost O(n))
+# The crown of a core's faces (dem/crown.py) as its height at the edge of a face as wide as the
+# piece, per unit of that width: R = size / (8 CROWN).
+CROWN = 5e-4
 
 
 class PolyhedronError(MeshError):
@@ -70,6 +73,21 @@ class Polyhedron:
     def piece_reach(self, k: int) -> float:
         """Radius of piece k's bounding sphere about ``piece_centre(k)``, rounding included."""
         return float(np.linalg.norm(self.piece(k) - self.piece_centre(k), axis=1).max()) + self.rounding
+
+    def crown(self, k: int) -> tuple[float, float, float]:
+        """Piece k's crown ``phi(x) = kappa (|x|^2 - h^2)`` about the centre of mass (``dem/crown.py``):
+        ``(kappa, kappa h^2, kappa reach^2)``, kappa = 1 / (2 R) with R = size / (8 CROWN), h the
+        distance of the nearest face plane of the core (0 if the centre is outside the core),
+        reach that of the furthest core vertex."""
+        core = self.piece(k)
+        kappa = 4.0 * CROWN / (2.0 * self.piece_reach(k))
+        try:
+            planes = ConvexHull(core).equations  # n . x + c <= 0 inside
+            h = max(0.0, float(np.min(-planes[:, 3])))
+        except QhullError:  # a flat core: no inside
+            h = 0.0
+        reach = float(np.linalg.norm(core, axis=1).max())
+        return kappa, kappa * h * h, kappa * reach * reach
 
     @property
     def equivalent_diameter(self) -> float:

@@ -1,4 +1,6 @@
-"""Contact geometry of rounded shapes (dem/rounded_contact.py) against hand-worked cases."""
+"""Contact geometry of rounded shapes (dem/rounded_contact.py, dem/crown.py) against hand-worked
+cases. The box's crown is ``phi(x) = kappa (|x|^2 - h^2)`` (``Polyhedron.crown``): zero at the foot of
+its centre on its nearest face, kappa times the squared distance from that foot along the face."""
 
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ from dem.walls import WallMesh
 
 EYE = np.eye(3)
 BOX = Polyhedron.box((0.04, 0.03, 0.01), 0.002, 1000.0)
+CROWN = np.asarray(BOX.crown(0))
+KAPPA, KAPPA_H2, _ = CROWN
 
 
 def floor():
@@ -34,6 +38,7 @@ def on_floor(rot, pos):
         rot,
         np.asarray(pos, float),
         BOX.rounding,
+        CROWN,
         f.tri.reshape(-1, 3),
         0,
         2,
@@ -41,6 +46,7 @@ def on_floor(rot, pos):
         f.normal[0],
         f.offset[0],
         EYE,
+        np.zeros(3),
         scratch(),
     )
 
@@ -59,18 +65,32 @@ def test_a_box_lying_across_the_facet_diagonal_is_one_contact_below_its_centre()
     assert sorted([s_uu, s_ww]) == pytest.approx(sorted([0.036**2 / 12, 0.026**2 / 12]), rel=1e-6)
 
 
-def test_a_slightly_tilted_face_is_pressed_at_its_winkler_centre_of_pressure():
-    # Depth falls linearly from 1e-4 m at x = -a to 0.5e-4 m at x = +a (a tilt about y): the centre
-    # of a linear pressure over [-a, a] is a^2 theta / (3 depth_centre) from the middle, towards -a.
-    a, deep, shallow = 0.018, 1e-4, 0.5e-4
-    theta = (deep - shallow) / (2 * a)
+def test_a_slightly_tilted_face_is_pressed_where_the_crowned_gap_is_least():
+    # A tilt theta about y: the height above the floor grows like theta (x + a), the crown like
+    # kappa x^2, so the contact point sits at x = -theta / (2 kappa) (to a relative theta^2 and
+    # kappa h), moving continuously from the middle (theta = 0) to the lower edge.
+    a = 0.018
+    theta = 0.4 * 2 * KAPPA * a
     rot = matrix(from_axis_angle(np.array([0, 1.0, 0]), -theta))
     lowest = float(np.min((BOX.core @ rot.T)[:, 2]))
-    delta, d, nx, ny, nz, cx, cy, cz, *_ = on_floor(rot, (0.0, 0.0, BOX.rounding - deep - lowest))
+    delta, d, nx, ny, nz, cx, cy, cz, *_ = on_floor(rot, (0.0, 0.0, BOX.rounding - 1e-4 - lowest))
 
-    assert delta == pytest.approx(deep, rel=1e-9)
-    middle = float(np.mean((BOX.core @ rot.T)[:, 0]))
-    assert cx - middle == pytest.approx(-a * a * theta / (3 * 0.5 * (deep + shallow)), rel=5e-3)
+    assert cx == pytest.approx(-theta / (2 * KAPPA), rel=1e-3)
+    assert cy == pytest.approx(0.0, abs=1e-12)
+    assert 0 < 1e-4 - delta < theta * a
+
+
+def test_a_face_tilted_past_the_crown_is_pressed_at_its_lower_edge():
+    a, theta = 0.018, 4 * KAPPA * 0.018
+    rot = matrix(from_axis_angle(np.array([0, 1.0, 0]), -theta))
+    lowest = float(np.min((BOX.core @ rot.T)[:, 2]))
+    delta, d, nx, ny, nz, cx, cy, cz, *_ = on_floor(rot, (0.0, 0.0, BOX.rounding - 1e-4 - lowest))
+
+    placed = BOX.core @ rot.T
+    lower_edge = placed[np.isclose(placed[:, 2], lowest)]
+    assert len(lower_edge) == 2
+    assert cx == pytest.approx(lower_edge[0, 0], abs=1e-12)
+    assert 1e-4 - delta == pytest.approx(KAPPA * a * a, rel=0.01)
 
 
 def test_a_box_standing_on_an_edge_touches_at_the_middle_of_the_edge():
@@ -78,10 +98,11 @@ def test_a_box_standing_on_an_edge_touches_at_the_middle_of_the_edge():
     lowest = float(np.min((BOX.core @ rot.T)[:, 2]))
     delta, d, nx, ny, nz, cx, cy, cz, *_ = on_floor(rot, (0.01, 0.02, -lowest + 0.0015))
 
-    assert delta == pytest.approx(0.0005, rel=1e-9)
     edge = (BOX.core @ rot.T)[np.isclose((BOX.core @ rot.T)[:, 2], lowest)]
     assert len(edge) == 2
-    assert (cx, cy) == pytest.approx(tuple(edge.mean(axis=0)[:2] + [0.01, 0.02]), abs=1e-12)
+    middle = edge.mean(axis=0)
+    assert delta == pytest.approx(0.0005 - (KAPPA * middle @ middle - KAPPA_H2), rel=1e-9)
+    assert (cx, cy) == pytest.approx(tuple(middle[:2] + [0.01, 0.02]), abs=1e-12)
 
 
 def test_a_box_above_the_facet_plane_is_rejected_before_gjk():
@@ -98,24 +119,29 @@ def pair(pos_a, rot_a, pos_b, rot_b, axis):
         rot_a,
         np.asarray(pos_a, float),
         BOX.rounding,
+        CROWN,
         BOX.core,
         0,
         8,
         rot_b,
         np.asarray(pos_b, float),
         BOX.rounding,
+        CROWN,
         axis,
         scratch(),
     )
 
 
-def test_stacked_boxes_touch_at_the_centre_of_their_overlapping_faces():
+def test_stacked_boxes_touch_midway_between_the_feet_of_their_centres():
     axis = np.zeros(3)
     delta, d, nx, ny, nz, cx, cy, cz, *_ = pair((0.01, 0.0, 0.0099), EYE, (0, 0, 0), EYE, axis)
 
-    assert delta == pytest.approx(0.0001, rel=1e-9)
-    assert (nx, ny, nz) == pytest.approx((0, 0, 1), abs=1e-9)
-    # Overlap of the faces: x in [-0.008, 0.018] and [-0.018, 0.008]: [-0.008, 0.008].
+    # kappa (x - 0.01)^2 + kappa x^2 is least at x = 0.005, inside the faces' overlap
+    # [-0.008, 0.008]; each crown there is kappa 0.005^2, and its slope 2 kappa 0.005 tilts the
+    # normal (the crowned faces push each other apart sideways).
+    assert delta == pytest.approx(0.0001 - 2 * KAPPA * 0.005**2, rel=1e-9)
+    slope = 2 * KAPPA * 0.005
+    assert (nx, ny, nz) == pytest.approx(np.array([slope, 0, 1]) / math.hypot(slope, 1), abs=1e-12)
     assert (cx, cy, cz) == pytest.approx((0.005, 0.0, 0.00495), abs=1e-12)
     assert axis == pytest.approx([0, 0, 1])
 
