@@ -168,7 +168,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         g = pp_group[p]
         first = p == 0 or pp_group[p - 1] != g
         single = first and (p == n_pp - 1 or pp_group[p + 1] != g)
-        if first:
+        if first and not single:
             grp_sum[g] = 0.0
         pp_delta[p] = -1.0
         if not (active[sbody[i]] and active[sbody[j]]):
@@ -199,6 +199,8 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
             pairs.point[p, 1] = cy + shift * ny
             pairs.point[p, 2] = cz + shift * nz
             pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2] = s_uu, s_uw, s_ww
+            if single:
+                grp_sum[g] = 0.0
             grp_sum[g] += share_weight(delta)
             n_deferred += 1
             continue

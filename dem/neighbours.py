@@ -35,6 +35,9 @@ N_PAIRS, N_GROUPS, N_NEEDED = 0, 1, 2
 # Columns of ``SpherePairs.group_law`` (filled at each build by ``dem.forces.body_pair_laws``).
 G_KN, G_CN, G_KT, G_CT, G_MU = 0, 1, 2, 3, 4
 _MIN_CAPACITY = 1024
+# Listed pairs hold their spheres, facets and groups as 32-bit indices: the force pass streams the
+# lists every step, and once they outgrow the cache (about 10,000 spheres) bytes per pair are time.
+_INDEX = np.int32
 
 
 class Grid(NamedTuple):
@@ -53,12 +56,12 @@ class SpherePairs(NamedTuple):
     """Sphere pairs of different bodies, grouped by body pair, with their tangential history."""
 
     count: np.ndarray  # (3,) int64: N_PAIRS, N_GROUPS, N_NEEDED
-    i: np.ndarray  # (capacity,) int64 first sphere (i < j)
-    j: np.ndarray  # (capacity,) int64
+    i: np.ndarray  # (capacity,) int32 first sphere (i < j)
+    j: np.ndarray  # (capacity,) int32
     hist: np.ndarray  # (capacity, 3) tangential spring elongation
-    group: np.ndarray  # (capacity,) int64 index of the body pair
-    new_i: np.ndarray  # (capacity,) int64 scratch of a rebuild
-    new_j: np.ndarray  # (capacity,) int64
+    group: np.ndarray  # (capacity,) int32 index of the body pair
+    new_i: np.ndarray  # (capacity,) int32 scratch of a rebuild
+    new_j: np.ndarray  # (capacity,) int32
     new_hist: np.ndarray  # (capacity, 3)
     delta: np.ndarray  # (capacity,) scratch of the force pass: overlap, -1 when apart
     normal: np.ndarray  # (capacity, 3) scratch of the force pass: unit normal j -> i
@@ -73,11 +76,11 @@ class WallPairs(NamedTuple):
     """Sphere-facet pairs sorted by (sphere, facet), with their tangential history."""
 
     count: np.ndarray  # (3,) int64: N_PAIRS, unused, N_NEEDED
-    i: np.ndarray  # (capacity,) int64 sphere
-    f: np.ndarray  # (capacity,) int64 facet
+    i: np.ndarray  # (capacity,) int32 sphere
+    f: np.ndarray  # (capacity,) int32 facet
     hist: np.ndarray  # (capacity, 3)
-    new_i: np.ndarray  # (capacity,) int64 scratch of a rebuild
-    new_f: np.ndarray  # (capacity,) int64
+    new_i: np.ndarray  # (capacity,) int32 scratch of a rebuild
+    new_f: np.ndarray  # (capacity,) int32
     new_hist: np.ndarray  # (capacity, 3)
     delta: np.ndarray  # (capacity,) scratch of the force pass: overlap, -1 when apart
     normal: np.ndarray  # (capacity, 3) scratch of the force pass: unit normal facet -> sphere
@@ -149,7 +152,7 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
     count = old.count if old is not None else np.zeros(3, dtype=np.int64)
 
     def ints(name):
-        return _kept(np.zeros(capacity, dtype=np.int64), getattr(old, name, None), n)
+        return _kept(np.zeros(capacity, dtype=_INDEX), getattr(old, name, None), n)
 
     return SpherePairs(
         count,
@@ -157,8 +160,8 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
         ints("j"),
         _kept(np.zeros((capacity, 3)), getattr(old, "hist", None), n),
         ints("group"),
-        np.zeros(capacity, dtype=np.int64),
-        np.zeros(capacity, dtype=np.int64),
+        np.zeros(capacity, dtype=_INDEX),
+        np.zeros(capacity, dtype=_INDEX),
         np.zeros((capacity, 3)),
         np.zeros(capacity),
         np.zeros((capacity, 3)),
@@ -175,11 +178,11 @@ def _wall_pairs(capacity: int, old: WallPairs | None) -> WallPairs:
     count = old.count if old is not None else np.zeros(3, dtype=np.int64)
     return WallPairs(
         count,
-        _kept(np.zeros(capacity, dtype=np.int64), getattr(old, "i", None), n),
-        _kept(np.zeros(capacity, dtype=np.int64), getattr(old, "f", None), n),
+        _kept(np.zeros(capacity, dtype=_INDEX), getattr(old, "i", None), n),
+        _kept(np.zeros(capacity, dtype=_INDEX), getattr(old, "f", None), n),
         _kept(np.zeros((capacity, 3)), getattr(old, "hist", None), n),
-        np.zeros(capacity, dtype=np.int64),
-        np.zeros(capacity, dtype=np.int64),
+        np.zeros(capacity, dtype=_INDEX),
+        np.zeros(capacity, dtype=_INDEX),
         np.zeros((capacity, 3)),
         np.zeros(capacity),
         np.zeros((capacity, 3)),
