@@ -5,7 +5,8 @@ compile once per installation, not once per simulation. ``fastmath`` stays off: 
 would make results depend on the compiler's choices and break determinism across runs.
 Numba's cache checks only the source file of the cached function, not the modules it calls (the
 run loop in ``dem/loop.py`` calls kernels of ``dem/integrate.py``, ``dem/neighbours.py``,
-``dem/forces.py``, ``dem/facets.py``, ``dem/contact.py``, ``dem/motion.py``, ``dem/quaternion.py``):
+``dem/forces.py``, ``dem/facets.py``, ``dem/contact.py``, ``dem/rounded_contact.py``,
+``dem/crown.py``, ``dem/convex.py``, ``dem/motion.py``, ``dem/quaternion.py``):
 after editing one of those in a working copy, delete ``dem/__pycache__/*.nb[ic]`` (installed
 releases change every file at once, so they are safe).
 This module must not import anything heavier than the standard library.
