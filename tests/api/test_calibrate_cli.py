@@ -161,19 +161,25 @@ def by_individual(store, study_id: str) -> dict[tuple[int, int, int], tuple]:
 
 
 @pytest.mark.slow
+def stopped_after_a_result(folder: Path, sig: int) -> tuple[subprocess.Popen, str, str]:
+    """``calibrate study.toml`` in ``folder`` sent ``sig`` once a trial has a result: the process,
+    its output and the study id it printed."""
+    process = demcal(["calibrate", "study.toml", "--workers", "1"], folder)
+    try:
+        wait_for_a_result(folder)
+    finally:
+        process.send_signal(sig)
+    output = finish(process, 60)
+    return process, output, next(word for word in output.split() if word.startswith("st-"))
+
+
 def test_ctrl_c_then_resume_gives_the_trials_and_results_of_an_uninterrupted_run(tmp_path):
     interrupted_dir, clean_dir = tmp_path / "interrupted", tmp_path / "clean"
     for folder in (interrupted_dir, clean_dir):
         folder.mkdir()
         write_study(folder, population=4, vibration_time=1.0)
     clean = demcal(["calibrate", "study.toml", "--workers", "1"], clean_dir)  # alongside, same seed
-    process = demcal(["calibrate", "study.toml", "--workers", "1"], interrupted_dir)
-    try:
-        wait_for_a_result(interrupted_dir)
-    finally:
-        process.send_signal(signal.SIGINT)
-    output = finish(process, 60)
-    study_id = next(word for word in output.split() if word.startswith("st-"))
+    process, output, study_id = stopped_after_a_result(interrupted_dir, signal.SIGINT)
     store = store_for(interrupted_dir)
     kept = {r.spec.trial_id: r.result for r in store.trials(study_id) if r.result is not None}
     resumed = demcal(["calibrate", "--resume", study_id, "--workers", "2"], interrupted_dir)
@@ -202,14 +208,8 @@ def test_sigterm_pauses_the_study_and_frees_it_so_no_serve_takes_it_over(tmp_pat
     from optimizer.protocols import StudyStatus
 
     write_study(tmp_path, population=4, vibration_time=1.0)
-    process = demcal(["calibrate", "study.toml", "--workers", "1"], tmp_path)
-    try:
-        wait_for_a_result(tmp_path)
-    finally:
-        process.send_signal(signal.SIGTERM)
-    output = finish(process, 60)
+    process, output, study_id = stopped_after_a_result(tmp_path, signal.SIGTERM)
     store = store_for(tmp_path)
-    study_id = next(word for word in output.split() if word.startswith("st-"))
 
     study = store.load_study(study_id)
     assert process.returncode == 130, output
