@@ -37,17 +37,18 @@ from dem.convex import _clip, _copy_row, _parallel_segments, feature_hulls, plan
 
 @numba.njit(**JIT_FLAGS)
 def _height_fit(pts, m, tol):
-    """(alpha, beta_u, beta_w): the linear height above the supporting plane over a feature's
-    hull pts[:m] (column 2 holds tol - height): a plane fitted to its vertices, a line along an
-    edge, a constant at a corner."""
+    """(alpha, beta_u, beta_w, flat): the linear height above the supporting plane over a
+    feature's hull pts[:m] (column 2 holds tol - height): a plane fitted to its vertices, a line
+    along an edge, a constant at a corner. ``flat``: the vertices lie on that plane (to 1e-6 of
+    tol), as a face's do; a curved patch of a mesh's outline does not."""
     if m == 1:
-        return tol - pts[0, 2], 0.0, 0.0
+        return tol - pts[0, 2], 0.0, 0.0, True
     if m == 2:
         eu, ew = pts[1, 0] - pts[0, 0], pts[1, 1] - pts[0, 1]
         ll = eu * eu + ew * ew
         slope = ((tol - pts[1, 2]) - (tol - pts[0, 2])) / ll
         bu, bw = slope * eu, slope * ew
-        return tol - pts[0, 2] - bu * pts[0, 0] - bw * pts[0, 1], bu, bw
+        return tol - pts[0, 2] - bu * pts[0, 0] - bw * pts[0, 1], bu, bw, True
     mu = mw = mh = 0.0
     for k in range(m):
         mu += pts[k, 0]
@@ -63,9 +64,16 @@ def _height_fit(pts, m, tol):
         suh += du * dh
         swh += dw * dh
     det = suu * sww - suw * suw
+    if not det > 1e-9 * (suu + sww) ** 2:
+        return mh, 0.0, 0.0, False
     bu = (sww * suh - suw * swh) / det
     bw = (suu * swh - suw * suh) / det
-    return mh - bu * mu - bw * mw, bu, bw
+    alpha = mh - bu * mu - bw * mw
+    flat = True
+    for k in range(m):
+        if abs(alpha + bu * pts[k, 0] + bw * pts[k, 1] - (tol - pts[k, 2])) > 1e-6 * tol + 1e-15:
+            flat = False
+    return alpha, bu, bw, flat
 
 
 @numba.njit(**JIT_FLAGS)
@@ -121,7 +129,7 @@ def _minimise(poly, m, c):
             b = (a + 1) % m
             if (poly[b, 0] - poly[a, 0]) * (w - poly[a, 1]) - (poly[b, 1] - poly[a, 1]) * (
                 u - poly[a, 0]
-            ) < 0.0:
+            ) <= 0.0:  # outside, or a polygon without area (collinear points)
                 inside = False
                 break
         if inside:
@@ -229,8 +237,8 @@ def crowned_contact(
     nx, ny, nz = nx / d, ny / d, nz / d
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
     ha, hb, eps = feature_hulls(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, d, nx, ny, nz, tol, work)
-    alpha_a, bua, bwa = _height_fit(work[0], ha, tol)
-    alpha_b, bub, bwb = _height_fit(work[1], hb, tol)
+    alpha_a, bua, bwa, flat_a = _height_fit(work[0], ha, tol)
+    alpha_b, bub, bwb, flat_b = _height_fit(work[1], hb, tol)
     s_a = ax * nx + ay * ny + az * nz  # A's supporting plane along n
     s_b = bx * nx + by * ny + bz * nz
     ka, kb = crown_a[0], crown_b[0]
@@ -238,7 +246,10 @@ def crowned_contact(
     tb, pub, pwb = _centre(pb, s_b, nx, ny, nz, ux, uy, uz, wx, wy, wz)
     c = (d, alpha_a, bua, bwa, ta, pua, pwa, ka, alpha_b, bub, bwb, tb, pub, pwb, kb)
     # Keep the hull that the clipping overwrites (in work[2]) for the tilt of the normal below.
-    if hb >= 3:
+    if not (flat_a and flat_b):  # curved features: their closest points
+        m = 0
+        poly, hull_a, hull_b = work[0], work[0], work[1]
+    elif hb >= 3:
         for k in range(ha):
             _copy_row(work[2], k, work[0], k)
         m = _clip(work[0], ha, work[1], hb, work[3])
@@ -253,14 +264,18 @@ def crowned_contact(
         poly, hull_a, hull_b = work[0], work[0], work[1]
         if ha == 2 and hb == 2:
             m = _parallel_segments(work[0], work[1], eps)
-    if m == 0:  # crossing edges, or a single pair of closest points: no freedom
-        cu = 0.5 * ((ax + bx) * ux + (ay + by) * uy + (az + bz) * uz)
-        cw = 0.5 * ((ax + bx) * wx + (ay + by) * wy + (az + bz) * wz)
-        ha_c = hb_c = 0.0
-    else:
+    ha_c = hb_c = -1.0
+    if m > 0:
         cu, cw = _minimise(poly, m, c)
         ha_c = alpha_a + bua * cu + bwa * cw
         hb_c = alpha_b + bub * cu + bwb * cw
+    slack = 1e-9 * tol + 1e-15
+    if ha_c < -slack or hb_c < -slack:
+        # crossing edges, a single pair of closest points (no freedom), or features whose
+        # overlap has no area: the closest points
+        cu = 0.5 * ((ax + bx) * ux + (ay + by) * uy + (az + bz) * uz)
+        cw = 0.5 * ((ax + bx) * wx + (ay + by) * wy + (az + bz) * wz)
+        ha_c = hb_c = 0.0
     za = s_a + ha_c
     zb = s_b - hb_c
     xx, xy, xz = cu * ux + cw * wx + za * nx, cu * uy + cw * wy + za * ny, cu * uz + cw * wz + za * nz
