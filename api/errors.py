@@ -59,14 +59,12 @@ class AuthenticationError(DemcalError):
 def _validation_message(exc: RequestValidationError, body_model=None) -> str:
     """One part per error: the field's path once (not again when the message starts with it),
     and for an unknown key the nearest valid one of the request's body model."""
-    from dem.scenarios.base import error_message
+    from dem.scenarios.base import error_line
 
     parts = []
     for err in exc.errors():
         loc = tuple(p for p in err.get("loc", ()) if p != "body")
-        location = ".".join(str(p) for p in loc)
-        message = error_message({**err, "loc": loc}, body_model)
-        parts.append(f"{location}: {message}" if location and not message.startswith(location) else message)
+        parts.append(error_line({**err, "loc": loc}, body_model))
     return "; ".join(parts) or "the request is not valid"
 
 

@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from dem.scenarios.registry import publish_config_schema
+from dem.scenarios.registry import ScenarioConfig
 from optimizer.protocols import PARAMETER_NAMES, StudyStatus, TrialState
 
 
@@ -291,9 +291,8 @@ class SimulationCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    scenario: dict[str, Any] = Field(
+    scenario: ScenarioConfig = Field(
         description="A scenario configuration; its kind (default feeder) picks it from the registry.",
-        json_schema_extra=publish_config_schema,
     )
     params: dict[str, float] = Field(
         description="E (Pa), nu, e, mu.",

@@ -55,9 +55,9 @@ FRESH_SEEDS = range(5000, 5010)
 
 
 def simulate(executor, scenario, params, seeds, label, timeout_s=None):
-    specs = [
-        TrialSpec(f"{label}-{seed}", label, 0, 0, 0, seed, params, scenario, timeout_s) for seed in seeds
-    ]
+    """``scenario`` is a study's validated config; trials carry it as JSON."""
+    data = scenario.model_dump(mode="json")
+    specs = [TrialSpec(f"{label}-{seed}", label, 0, 0, 0, seed, params, data, timeout_s) for seed in seeds]
     executor.submit(specs)
     results = {}
     while len(results) < len(specs):
@@ -94,7 +94,7 @@ def validate(executor, definition, evaluation, seeds, label, timeout_s):
             r,
             seed,
             evaluation.params,
-            definition.scenario,
+            definition.scenario.model_dump(mode="json"),
             timeout_s,
         )
         for r, seed in enumerate(seeds)

@@ -17,7 +17,8 @@ import argparse
 import statistics
 import time
 
-from dem.scenarios.feeder import load_feeder_config, run_feeder
+from dem.scenarios.feeder import run_feeder
+from dem.scenarios.feeder_config import load_feeder_config
 
 SETS = {
     "empties": {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.5},

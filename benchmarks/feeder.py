@@ -19,7 +19,8 @@ import time
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
-from dem.scenarios.feeder import load_feeder_config, run_feeder  # noqa: E402
+from dem.scenarios.feeder import run_feeder  # noqa: E402
+from dem.scenarios.feeder_config import load_feeder_config  # noqa: E402
 
 
 def main() -> None:

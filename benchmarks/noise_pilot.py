@@ -10,7 +10,8 @@ import argparse
 import statistics
 import time
 
-from dem.scenarios.feeder import load_feeder_config, run_feeder
+from dem.scenarios.feeder import run_feeder
+from dem.scenarios.feeder_config import load_feeder_config
 
 
 def main() -> None:

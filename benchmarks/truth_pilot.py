@@ -27,7 +27,8 @@ from pathlib import Path
 
 from scipy.stats import wasserstein_distance
 
-from dem.scenarios.feeder import load_feeder_config, run_feeder
+from dem.scenarios.feeder import run_feeder
+from dem.scenarios.feeder_config import load_feeder_config
 
 ROOT = Path(__file__).resolve().parent.parent
 EXPERIMENT_SEEDS = range(1000, 1010)

@@ -300,7 +300,7 @@ class Driver:
             replicate=replicate,
             seed=trial_seed(definition.seed, replicate) if seed is None else seed,
             params=dict(params),
-            scenario=definition.scenario,
+            scenario=definition.scenario.model_dump(mode="json"),
             timeout_s=definition.trial_timeout_s,
             keep_snapshots=definition.keep_snapshots,
             engine=definition.engine,

@@ -27,7 +27,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from dem.parameters import PARAMETER_NAMES, in_physical_range, physical_range_text
-from dem.scenarios.registry import publish_config_schema
+from dem.scenarios import registry
 
 
 class StudyDefinitionError(ValueError):
@@ -220,11 +220,10 @@ class StudyDefinition(_Strict):
 
     name: str = Field("study", min_length=1, max_length=120, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
     description: str = ""
-    scenario: dict[str, Any] = Field(
+    scenario: registry.ScenarioConfig = Field(
         ...,
         description="The scenario's configuration as a table; its 'kind' (default 'feeder') picks the "
         "scenario from dem.scenarios.registry, whose config model validates the rest.",
-        json_schema_extra=publish_config_schema,
     )
     engine: str = Field(
         "numba",
@@ -292,16 +291,13 @@ class StudyDefinition(_Strict):
         if isinstance(data, dict) and "experiment" in data:
             if "experiments" in data:
                 raise ValueError("give either 'experiment' (one) or 'experiments' (a list), not both")
-            from dem.scenarios.base import error_message
+            from dem.scenarios.base import error_line
 
             try:  # errors name the key the user wrote: experiment.measured, not experiments.0.measured
                 Experiment.model_validate(data["experiment"])
             except ValidationError as exc:
                 raise ValueError(
-                    "; ".join(
-                        f"experiment.{'.'.join(str(p) for p in err['loc'])}: {error_message(err, Experiment)}"
-                        for err in exc.errors()
-                    )
+                    "; ".join(error_line(err, Experiment, "experiment") for err in exc.errors())
                 ) from None
             data = {**data, "experiments": [data["experiment"]]}
             del data["experiment"]
@@ -311,9 +307,8 @@ class StudyDefinition(_Strict):
     def _responses_and_engine(self) -> StudyDefinition:
         """Every experiment names a response the scenario measures; the engine can run it."""
         from dem.engines.base import UnknownEngineError, refusal
-        from dem.scenarios.registry import for_config
 
-        scenario = for_config(self.scenario)
+        scenario = registry.get(self.scenario.kind)
         declared = {r.name: r for r in scenario.declared(self.scenario)}
         for index, experiment in enumerate(self.experiments):
             name = experiment.response or next(iter(declared))
@@ -409,18 +404,7 @@ class StudyDefinition(_Strict):
     def validity_warning(self) -> str | None:
         """A warning when the E bounds reach below the E at which the contact model's overlap
         limit is likely exceeded at insertion (``dem.scenarios.feeder.softest_valid_E``)."""
-        return _validity_warning(json.dumps(self.scenario, sort_keys=True), self.parameters.model_dump_json())
-
-    @field_validator("scenario")
-    @classmethod
-    def _scenario_config(cls, scenario: dict[str, Any]) -> dict[str, Any]:
-        """Validated by its kind's model (a discriminated union on ``kind`` through the registry)."""
-        from dem.scenarios.registry import ScenarioConfigError, validate_config
-
-        try:
-            return validate_config(scenario)
-        except ScenarioConfigError as exc:
-            raise ValueError(str(exc)) from None
+        return _validity_warning(self.scenario.model_dump_json(), self.parameters.model_dump_json())
 
     @model_validator(mode="after")
     def _target_computable(self) -> StudyDefinition:
@@ -468,31 +452,26 @@ class StudyDefinition(_Strict):
     def n_items(self) -> int:
         """What the first experiment's response counts as for a failed simulation (the feeder:
         every item retained); f1 of a failed individual with one experiment."""
-        from dem.scenarios.registry import for_config
-
-        failed = for_config(self.scenario).failed_responses(self.scenario)
+        failed = registry.get(self.scenario.kind).failed_responses(self.scenario)
         return failed[self.experiments[0].response]
 
     def declared_responses(self) -> dict:
         """The scenario's responses by name (``dem.scenarios.base.Response``: unit, integer, label)."""
-        from dem.scenarios.registry import for_config
-
-        return {r.name: r for r in for_config(self.scenario).declared(self.scenario)}
+        return {r.name: r for r in registry.get(self.scenario.kind).declared(self.scenario)}
 
     def failed_responses(self) -> dict[str, float]:
         """Every response's value for a failed simulation."""
-        from dem.scenarios.registry import for_config
-
-        return for_config(self.scenario).failed_responses(self.scenario)
+        return registry.get(self.scenario.kind).failed_responses(self.scenario)
 
 
 @functools.lru_cache(maxsize=64)
 def _validity_warning(scenario_json: str, parameters_json: str) -> str | None:
-    from dem.scenarios.feeder import FeederConfig, softest_valid_E
+    from dem.scenarios.feeder import softest_valid_E
+    from dem.scenarios.feeder_config import FeederConfig
 
     parameters = Parameters.model_validate_json(parameters_json)
     try:
-        config = FeederConfig.model_validate(json.loads(scenario_json))
+        config = FeederConfig.model_validate_json(scenario_json)
     except ValueError:
         return None  # not the feeder: its insertion drop is what the estimate knows
     if parameters.E is None or parameters.e is None:
@@ -585,14 +564,9 @@ def load_study_file(path: str | Path) -> StudyDefinition:
 def describe_validation_error(exc: ValidationError) -> str:
     """pydantic's errors as one line per field, in the study file's own key names; an unknown key
     names the nearest valid one."""
-    from dem.scenarios.base import error_message
+    from dem.scenarios.base import error_line
 
-    problems = []
-    for err in exc.errors():
-        where = ".".join(str(part) for part in err["loc"])
-        message = error_message(err, StudyDefinition)
-        problems.append(message if not where or message.startswith(where) else f"{where}: {message}")
-    return "; ".join(problems)
+    return "; ".join(error_line(err, StudyDefinition) for err in exc.errors())
 
 
 def check_limits(definition: StudyDefinition, *, max_population: int, max_simulations: int) -> None:

@@ -32,7 +32,8 @@ def warm_up() -> float:
     the first trial compiles, which it reports in its own result."""
     started = time.monotonic()
     try:
-        from dem.scenarios.feeder import FeederConfig, run_feeder
+        from dem.scenarios.feeder import run_feeder
+        from dem.scenarios.feeder_config import FeederConfig
 
         result = run_feeder(FeederConfig.model_validate(WARMUP_SCENARIO), dict(WARMUP_PARAMS), seed=0)
         if not result.ok:

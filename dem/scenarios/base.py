@@ -1,16 +1,17 @@
 """What every scenario declares, so that nothing outside ``dem/scenarios/`` needs to know one.
 
 A scenario is one laboratory experiment made a simulation (the vibration feeder, a heap's angle
-of repose). Its module defines a ``Scenario`` object and registers it in
-``dem/scenarios/registry.py`` under its ``kind``; studies, workers, the API and the CLI then reach
-it only through ``registry.get(kind)``.
+of repose). Its module defines a ``Scenario`` object, listed in ``dem/scenarios/registry.py``
+under its ``kind``; studies, workers, the API and the CLI then reach it only through
+``registry.get(kind)``, and a study definition reaches its config model only through
+``registry.ScenarioConfig``.
 
 A scenario declares:
 
 * ``kind`` — the name a study's ``[scenario]`` table carries as ``kind = "..."``;
 * ``config_model`` — a pydantic model of its configuration, with a ``kind: Literal[...]`` field
   (the discriminator of ``StudyDefinition.scenario``) and a ``params`` section of default contact
-  parameters (``ParamsConfig``);
+  parameters (``ParamsConfig``), in a module of its own that imports nothing heavy;
 * ``responses`` — the named quantities a run measures (``Response``: unit, integer or real, the
   value a failed run gets, which the objectives use as the worst case, and the short label the
   dashboard's axes and tables print with the unit, "angle of repose (deg)");
@@ -23,13 +24,20 @@ A scenario declares:
 * ``engines`` — which engines can run it (``"numba"`` always; ``"liggghts"`` when an adapter exists
   in ``dem/engines/liggghts.py``; ``"command"`` for any scenario).
 
-How to add a scenario (the angle of repose, ``dem/scenarios/heap.py``, followed this recipe):
+How to add a scenario (the angle of repose, ``dem/scenarios/heap_config.py`` and
+``dem/scenarios/heap.py``, followed this recipe):
 
-1. write ``dem/scenarios/<name>.py`` with a config model (``kind`` literal + ``params``), its
-   ``run`` and a module-level ``SCENARIO = Scenario(...)``;
-2. add its module to ``BUILT_IN`` in ``dem/scenarios/registry.py``;
-3. add a quick example config under ``examples/`` and tests under ``tests/dem/``: the registry test
-   then checks the declaration (every response produced, cost positive, JSON round trip).
+1. write its config model (``kind: Literal["<kind>"] = "<kind>"``, a ``params`` section, the rest
+   ``Section``s) in ``dem/scenarios/<name>_config.py``, importing only pydantic, numpy and other
+   config modules: every study definition imports it (``tests/dem/test_scenario_registry.py``
+   checks that no engine comes with it);
+2. write ``dem/scenarios/<name>.py`` with its ``run`` and a module-level ``SCENARIO = Scenario(...)``
+   whose ``config_model`` is that model;
+3. add ``"<kind>": ("dem.scenarios.<name>_config:<Model>", "dem.scenarios.<name>")`` to ``BUILT_IN``
+   in ``dem/scenarios/registry.py``: the study's scenario union and the API's schema gain it;
+4. add a quick example config under ``examples/`` and tests under ``tests/dem/``: the registry test
+   then checks the declaration (every response produced, cost positive, JSON round trip, the
+   config model the one the union holds).
 """
 
 from __future__ import annotations
@@ -39,7 +47,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
@@ -205,19 +213,44 @@ def _floats(values: dict) -> dict[str, float]:
     return out
 
 
+def field_path(
+    model: type[BaseModel] | None, loc: Sequence[Any]
+) -> tuple[tuple[Any, ...], type[BaseModel] | None]:
+    """A pydantic error location as the user wrote it, and the model its last key belongs to
+    (None when the path leaves the models). pydantic puts a discriminated union's tag after the
+    field (``scenario.angle_of_repose.cylinder``); the user wrote ``scenario.cylinder``."""
+    path: list[Any] = []
+    owner, current = None, model
+    rest = list(loc)
+    while rest:
+        part = rest.pop(0)
+        path.append(part)
+        if isinstance(part, int):  # an index into a list: the same model
+            continue
+        owner = current
+        field = current.model_fields.get(str(part)) if current is not None else None
+        if field is None:
+            current = None
+            continue
+        members = [
+            c for c in (field.annotation, *get_args(field.annotation))
+            if isinstance(c, type) and issubclass(c, BaseModel)
+        ]
+        current = members[0] if members else None
+        if field.discriminator and rest:
+            tagged = {m.model_fields[field.discriminator].default: m for m in members}
+            if rest[0] in tagged:
+                current = tagged[rest.pop(0)]
+    return tuple(path), owner
+
+
 def nearest_key(model: type[BaseModel] | None, loc: Sequence[Any]) -> str | None:
     """The valid key closest to an unknown one at ``loc`` (a pydantic error location) in
     ``model``, for "did you mean ...?"; None when nothing is close or the path leaves the models."""
-    current = model
-    for part in loc[:-1]:
-        field = current.model_fields.get(str(part)) if current is not None else None
-        if field is None:
-            return None
-        candidates = [field.annotation, *getattr(field.annotation, "__args__", ())]
-        current = next((c for c in candidates if isinstance(c, type) and issubclass(c, BaseModel)), None)
-    if current is None or not loc:
+    path, owner = field_path(model, loc)
+    if owner is None or not path:
         return None
-    close = difflib.get_close_matches(str(loc[-1]), list(current.model_fields), n=1, cutoff=0.6)
+    close = difflib.get_close_matches(str(path[-1]), list(owner.model_fields), n=1, cutoff=0.6)
     return close[0] if close else None
 
 
@@ -228,3 +261,12 @@ def error_message(err: dict[str, Any], model: type[BaseModel] | None) -> str:
         near = nearest_key(model, tuple(err.get("loc", ())))
         message = f"unknown key{f'; did you mean {near!r}?' if near else ''}"
     return message
+
+
+def error_line(err: dict[str, Any], model: type[BaseModel] | None, prefix: str = "") -> str:
+    """One pydantic error as ``where: message``, ``where`` the key's path as the user wrote it
+    under ``prefix``, given once (not again when the message starts with it)."""
+    path, _ = field_path(model, tuple(err.get("loc", ())))
+    where = ".".join(str(part) for part in (prefix, *path) if part != "")
+    message = error_message(err, model)
+    return message if not where or message.startswith(where) else f"{where}: {message}"

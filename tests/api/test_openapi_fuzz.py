@@ -167,13 +167,22 @@ def test_scenario_and_params_publish_their_real_schema(fuzzed_app):
     with TestClient(app) as client:
         schemas = client.get("/openapi.json").json()["components"]["schemas"]
 
+    def resolve(node):
+        return schemas[node["$ref"].rsplit("/", 1)[-1]]
+
     for model in ("SimulationCreate", "StudyDefinition"):
         scenario = schemas[model]["properties"]["scenario"]
-        by_title = {alternative["title"]: alternative for alternative in scenario["anyOf"]}
-        feeder = by_title["FeederConfig"]
+        # a discriminated union on kind: one alternative per registered kind
+        assert scenario["discriminator"]["propertyName"] == "kind"
+        assert set(scenario["discriminator"]["mapping"]) == {"feeder", "angle_of_repose", "combined"}
+        mapping = scenario["discriminator"]["mapping"]
+        by_kind = {kind: resolve({"$ref": ref}) for kind, ref in mapping.items()}
+        assert [resolve(alt)["title"] for alt in scenario["oneOf"]] == [
+            "FeederConfig", "HeapConfig", "CombinedConfig"
+        ]
+        feeder = by_kind["feeder"]
         assert feeder["additionalProperties"] is False
         assert {"tray", "items", "stages", "vibration", "run"} <= set(feeder["properties"])
-        assert "$ref" not in str(scenario)  # self-contained
-        assert "kind" in by_title["HeapConfig"]["required"]  # only the feeder may leave it out
+        assert {"particles", "cylinder", "plate", "fit"} <= set(by_kind["angle_of_repose"]["properties"])
     params = schemas["SimulationCreate"]["properties"]["params"]
     assert (params["required"], params["additionalProperties"]) == (["E", "nu", "e", "mu"], False)

@@ -14,7 +14,8 @@ from pydantic import ValidationError
 
 from dem.contact import wall_stiffness
 from dem.result import SimulationStatus
-from dem.scenarios.feeder import FeederConfig, body_frame_hull, load_feeder_config, make_items, run_feeder
+from dem.scenarios.feeder import body_frame_hull, make_items, run_feeder
+from dem.scenarios.feeder_config import FeederConfig, load_feeder_config
 from dem.scenarios.items import CATALOGUE, nominal_volume
 from dem.scenarios.render import load_run
 

@@ -18,7 +18,8 @@ from dem.engines.base import run_scenario
 from dem.result import SimulationStatus
 from dem.scenarios import registry
 from dem.scenarios.base import RunControl
-from dem.scenarios.heap import HeapConfig, _HeapRun, heap_geometry, sphere_packing
+from dem.scenarios.heap import _HeapRun, heap_geometry, sphere_packing
+from dem.scenarios.heap_config import HeapConfig
 from dem.scenarios.heap_fit import FitConfig, HeapFitError, fit_heap
 
 QUICK = "examples/repose-quick.toml"

@@ -27,6 +27,20 @@ def test_registry_lists_the_built_in_kinds_and_names_unknown_ones():
     assert registry.for_config({}).kind == "feeder"  # studies stored before kinds existed
 
 
+@pytest.mark.parametrize("kind", sorted(registry.BUILT_IN))
+def test_each_kind_s_light_config_model_is_the_one_its_scenario_validates_with(kind):
+    model = registry.config_model(kind)
+    assert registry.get(kind).config_model is model
+    assert model.model_fields["kind"].default == kind  # the union's tag is the registry's key
+
+
+def test_a_study_definition_imports_no_engine():
+    """The scenario union names every kind's config model; none of them may pull in numba."""
+    script = "import sys, optimizer.study; print(sorted({'numba', 'trimesh', 'scipy'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
 @pytest.mark.parametrize("kind", ["feeder", "angle_of_repose"])
 def test_every_scenario_declares_what_callers_need(kind):
     scenario = registry.get(kind)
@@ -182,7 +196,7 @@ def test_threads_asking_at_once_all_see_every_built_in_kind():
         "seen, start = [], threading.Barrier(8)\n"
         "def ask():\n"
         "    start.wait()\n"
-        "    seen.append(registry.kinds())\n"
+        "    seen.append([registry.get(kind).kind for kind in registry.kinds()])\n"
         "threads = [threading.Thread(target=ask) for _ in range(8)]\n"
         "[t.start() for t in threads]\n"
         "[t.join() for t in threads]\n"
