@@ -254,7 +254,9 @@ class StudyProgressRead(_Wire):
 class ParameterIdentifiability(_Wire):
     name: str
     first_order: float = Field(description="Sobol first-order index of the response model's mean.")
-    total: float = Field(description="Sobol total index: how much N_t depends on it, interactions included.")
+    total: float = Field(
+        description="Sobol total index: how much the response depends on it, interactions included."
+    )
     length_scale: float = Field(description="The Gaussian process's ARD length scale (long = flat).")
     matching_sets: int
     matching_range: list[float] | None = Field(None, description="[low, high] over the matching sets.")
@@ -264,13 +266,37 @@ class ParameterIdentifiability(_Wire):
     verdict: Literal["pinned", "weak", "not identifiable"]
 
 
+class ParameterIdentifiabilityTogether(ParameterIdentifiability):
+    """One parameter as all the study's experiments see it together."""
+
+    response: str = Field(description="The experiment's response most sensitive to it (its indices).")
+    pinned_by: list[str] = Field(description="The experiments' responses that pin it alone.")
+    pinned_together: bool = Field(
+        description="Pinned by the experiments together though by none alone (their ridges cross)."
+    )
+
+
+class ExperimentIdentifiability(_Wire):
+    """What one experiment alone says (its response's model, its own matching sets)."""
+
+    response: str
+    method: str
+    simulations: int
+    parameters: list[ParameterIdentifiability]
+    reason: str = ""
+
+
 class IdentifiabilityRead(_Wire):
-    """Which searched parameters the experiment pins down (``optimizer/identifiability.py``)."""
+    """Which searched parameters the experiments pin down, each alone and together
+    (``optimizer/identifiability.py``)."""
 
     study_id: str
     method: str
     simulations: int = Field(description="Successful simulations the indices come from.")
-    parameters: list[ParameterIdentifiability]
+    parameters: list[ParameterIdentifiabilityTogether] = Field(
+        description="Every experiment together: the sets matching them all (one experiment: its own)."
+    )
+    experiments: list[ExperimentIdentifiability] = Field(description="Each experiment alone, in order.")
     reason: str = Field("", description="Why there are no indices yet, if there are none.")
 
 

@@ -1,9 +1,10 @@
-"""Identifiability: which contact parameters the experiment pins down, and which it does not.
+"""Identifiability: which contact parameters the experiments pin down, and which they do not.
 
-Two views, both from a study's own simulations (no new runs):
+Two views, both from a study's own simulations (no new runs), for each experiment and for all
+of a study's experiments together (``study_identifiability``):
 
 - **Sensitivity** of the response: variance-based (Sobol) indices of the surrogate's mean of
-  the first experiment's response (a count such as N_t through ``2 sqrt(N_t + 3/8)``, which makes
+  an experiment's response (a count such as N_t through ``2 sqrt(N_t + 3/8)``, which makes
   its noise even; a real value such as an angle as it is) over the search box (the same
   Gaussian process the surrogate search fits, ``optimizer/surrogate.py``), estimated with
   Saltelli's first-order and Jansen's total estimators on a scrambled Sobol sample. A parameter
@@ -17,6 +18,9 @@ Two views, both from a study's own simulations (no new runs):
 
 Verdict per parameter: ``pinned`` (total index >= 0.1 and the matching sets span less than half
 its range), ``not identifiable`` (total index < 0.02: the response ignores it), else ``weak``.
+Several experiments together: the most sensitive experiment's index and the spread of the sets
+that match them all; a parameter no experiment pins alone but all pin together (two ridges that
+cross, as a heap's angle and the feeder's N_t can) is ``pinned_together``.
 With fewer than 8 successful simulations or a constant response there is nothing to say, and
 the result says why.
 
@@ -25,7 +29,7 @@ This module computes; it must not run simulations or read stores. Deterministic 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.stats import qmc
@@ -80,12 +84,14 @@ def identifiability(
     response: str = "",
     label: str = "N_t",
     count: bool = True,
+    matches: Callable[[Evaluation], bool] | None = None,
 ) -> dict:
     """Per free parameter: Sobol indices, length scale, the matching sets' range and a verdict.
 
     ``response`` names the experiment's response in ``Evaluation.responses`` (default: the
     first experiment's, ``n_remaining``); ``count`` says it counts (Anscombe transform);
-    ``tolerance`` is the study's match tolerance on f1."""
+    ``tolerance`` is the study's match tolerance on f1, which says which sets match unless
+    ``matches`` does (one experiment of several)."""
     rows = [
         (space.genes(ev.params), n)
         for ev in evaluations
@@ -116,35 +122,105 @@ def identifiability(
         model = fit_gp(genes, values, random_state=0)
         first, total = sobol_indices(model.predict, space.n_genes)
     scales = length_scales(model)
-    matching = np.array([space.genes(ev.params) for ev in evaluations if ev.matches(tolerance)])
+    matches = matches or (lambda ev: ev.matches(tolerance))
+    matching = np.array([space.genes(ev.params) for ev in evaluations if matches(ev)])
     for i, axis in enumerate(space.axes):
-        spread = low = high = None
-        if len(matching) >= 2:
-            spread = float(np.ptp(matching[:, i]))
-        if len(matching):
-            low, high = axis.value(matching[:, i].min()), axis.value(matching[:, i].max())
+        spread = _matching(matching, i, axis)
         result["parameters"].append(
             {
                 "name": axis.name,
                 "first_order": round(float(first[i]), 4),
                 "total": round(float(total[i]), 4),
                 "length_scale": round(float(scales[i]), 4),
-                "matching_sets": int(len(matching)),
-                "matching_range": None if low is None else [low, high],
-                "matching_spread": None if spread is None else round(spread, 4),
-                "verdict": _verdict(float(total[i]), spread),
+                **spread,
+                "verdict": _verdict(float(total[i]), spread["matching_spread"]),
             }
         )
     return result
 
 
+def _matching(matching: np.ndarray, i: int, axis) -> dict:
+    """The matching sets' count, range and spread (share of the searched range) on gene ``i``."""
+    spread = float(np.ptp(matching[:, i])) if len(matching) >= 2 else None
+    found = len(matching) > 0
+    return {
+        "matching_sets": int(len(matching)),
+        "matching_range": [axis.value(matching[:, i].min()), axis.value(matching[:, i].max())]
+        if found
+        else None,
+        "matching_spread": None if spread is None else round(spread, 4),
+    }
+
+
 def study_identifiability(evaluations: Sequence[Evaluation], definition, space: ParameterSpace) -> dict:
-    """``identifiability`` of a study: its first experiment's response, declared unit and kind,
-    and the study's own match tolerance (f1 of several experiments is in tolerances)."""
-    name = definition.experiments[0].response
-    declared = definition.declared_responses().get(name)
-    return identifiability(
-        evaluations, space, definition.match_tolerance(), response=name,
-        label=(declared.label or name) if declared else name,
-        count=declared.integer if declared else True,
-    )
+    """``identifiability`` of a study, for every experiment and for all of them together.
+
+    ``experiments``: one result per experiment, its declared response modelled as it is (a count
+    through the Anscombe transform), its matching sets those within that experiment's own
+    tolerance. The top level is the study's: per parameter, the most sensitive experiment's
+    indices (``response`` names it), the spread of the sets that match every experiment (the
+    study's own match), its verdict, the experiments that pin it alone (``pinned_by``), and
+    ``pinned_together`` when the experiments pin it only jointly (each alone leaves a ridge of
+    equally good values, their intersection does not). With one experiment the top level is
+    that experiment's result."""
+    declared = definition.declared_responses()
+    tolerance = definition.match_tolerance()
+    per_experiment = []
+    for experiment in definition.experiments:
+        name = experiment.response
+        response = declared.get(name)
+        result = identifiability(
+            evaluations, space, tolerance, response=name,
+            label=(response.label or name) if response else name,
+            count=response.integer if response else True,
+            matches=_matches(experiment),
+        )
+        per_experiment.append({"response": name, **result})
+    first = per_experiment[0]
+    study = {key: first[key] for key in ("method", "simulations", "reason")}
+    study["experiments"] = per_experiment
+    study["parameters"] = _together(evaluations, space, tolerance, per_experiment)
+    return study
+
+
+def _matches(experiment) -> Callable[[Evaluation], bool]:
+    """Whether a set matches this one experiment (its own distance within its own tolerance)."""
+    from optimizer.objectives import experiment_distance
+
+    def matches(ev: Evaluation) -> bool:
+        values = ev.responses.get(experiment.response) or []
+        if not ev.ok or not values:
+            return False
+        return experiment_distance(values, experiment) <= experiment.tolerance + 1e-9
+
+    return matches
+
+
+def _together(evaluations, space: ParameterSpace, tolerance: float, per_experiment: list[dict]) -> list[dict]:
+    """Per parameter: what the experiments say together (see ``study_identifiability``)."""
+    assessed = [
+        ({row["name"]: row for row in result["parameters"]}, result["response"])
+        for result in per_experiment
+        if result["parameters"]
+    ]
+    if not assessed:
+        return []
+    matching = np.array([space.genes(ev.params) for ev in evaluations if ev.matches(tolerance)])
+    rows = []
+    for i, axis in enumerate(space.axes):
+        candidates = [(by_name[axis.name], response) for by_name, response in assessed]
+        best, response = max(candidates, key=lambda pair: pair[0]["total"])
+        spread = _matching(matching, i, axis)
+        pinned_by = [name for row, name in candidates if row["verdict"] == "pinned"]
+        verdict = _verdict(best["total"], spread["matching_spread"])
+        rows.append(
+            {
+                **{key: best[key] for key in ("name", "first_order", "total", "length_scale")},
+                "response": response,
+                **spread,
+                "verdict": verdict,
+                "pinned_by": pinned_by,
+                "pinned_together": verdict == "pinned" and not pinned_by,
+            }
+        )
+    return rows

@@ -357,12 +357,17 @@ def _report_progress(console, progress: dict, identified: dict) -> None:
         )
     if identified["parameters"]:
         verdicts = ", ".join(
-            f"{entry['name']} {entry['verdict']} (total index {entry['total']:.2f}"
+            f"{entry['name']} {'pinned together' if entry.get('pinned_together') else entry['verdict']} "
+            f"(total index {entry['total']:.2f}"
             + _spread_text(entry["matching_spread"])
             + ")"
             for entry in identified["parameters"]
         )
         console.print(f"identifiability: {verdicts}", soft_wrap=True)
+        alone = [entry for entry in identified.get("experiments", []) if entry["parameters"]]
+        for entry in alone if len(alone) > 1 else []:
+            own = ", ".join(f"{row['name']} {row['verdict']}" for row in entry["parameters"])
+            console.print(f"  {entry['response']} alone: {own}", soft_wrap=True)
     else:
         console.print(f"identifiability: {identified.get('reason') or 'not available'}", soft_wrap=True)
 

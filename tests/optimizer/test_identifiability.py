@@ -114,3 +114,47 @@ def test_the_study_view_uses_the_first_experiments_declared_response():
     result = study_identifiability(evaluations, heap, space)
 
     assert "angle of repose" in result["method"] and "sqrt" not in result["method"]
+
+
+def test_a_heap_and_feeder_study_is_assessed_per_experiment_and_together():
+    """Each experiment alone leaves a ridge: the angle fixes e + mu, N_t fixes mu - e. Together
+    they pin both; E moves neither response. Every experiment is assessed, not just the first."""
+    from optimizer.identifiability import study_identifiability
+    from optimizer.objectives import match_distance
+    from optimizer.study import StudyDefinition
+
+    study = StudyDefinition.model_validate({
+        "name": "heap-and-feeder",
+        "scenario": {"kind": "combined", "parts": {"heap": {"kind": "angle_of_repose"}, "feeder": {}}},
+        "parameters": {"nu": {"fixed": 0.3}},
+        "experiments": [
+            {"response": "heap.angle_deg", "measured": [30.0, 30.0, 30.0], "tolerance": 1.0},
+            {"response": "feeder.n_remaining", "measured": [10, 10, 10], "tolerance": 0.5},
+        ],
+    })
+    space = ParameterSpace(study.parameters)
+    rng = np.random.default_rng(3)
+    near = np.column_stack([rng.random(60), 0.5 + 0.03 * rng.standard_normal((60, 2))]).clip(0, 1)
+    evaluations = []
+    for individual, (g_E, g_e, g_mu) in enumerate(np.vstack([rng.random((160, 3)), near])):
+        responses = {"heap.angle_deg": [20.0 + 10.0 * (g_e + g_mu)],
+                     "feeder.n_remaining": [float(round(10 + 10 * (g_mu - g_e)))]}
+        f1 = match_distance(responses, study)
+        evaluations.append(Evaluation(individual, 0, space.params([g_E, g_e, g_mu]), f1, 1.0,
+                                      responses["heap.angle_deg"], 1.0, 1.0, responses=responses))
+
+    result = study_identifiability(evaluations, study, space)
+
+    alone = {entry["response"]: {row["name"]: row for row in entry["parameters"]}
+             for entry in result["experiments"]}
+    assert set(alone) == {"heap.angle_deg", "feeder.n_remaining"}
+    assert "sqrt" not in result["experiments"][0]["method"] and "sqrt" in result["experiments"][1]["method"]
+    for response in alone:  # each alone: a ridge of equally good (e, mu)
+        assert alone[response]["mu"]["verdict"] == alone[response]["e"]["verdict"] == "weak"
+        assert alone[response]["E"]["verdict"] == "not identifiable"
+    together = {row["name"]: row for row in result["parameters"]}
+    for name in ("e", "mu"):
+        assert together[name]["verdict"] == "pinned", together[name]
+        assert together[name]["pinned_together"] and together[name]["pinned_by"] == []
+        assert together[name]["matching_spread"] < 0.3
+    assert together["E"]["verdict"] == "not identifiable" and not together["E"]["pinned_together"]

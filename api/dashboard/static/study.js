@@ -260,24 +260,48 @@ async function renderProgress() {
 
 const VERDICT_CLASS = { pinned: "ok", weak: "paused", "not identifiable": "failed" };
 
+function verdictBadge(verdict, text) {
+  return el("span", { class: `status ${VERDICT_CLASS[verdict] || ""}`, text: text || verdict });
+}
+
 function renderIdentifiability(identified) {
   const entries = identified.parameters || [];
+  // Several experiments: the verdict is theirs together, and each one's own verdict is shown
+  // beside it, so that a parameter pinned only by the experiments together says so.
+  const alone = (identified.experiments || []).filter((x) => x.parameters.length);
+  const several = alone.length > 1;
+  const label = (name) => {
+    const response = responses.find((r) => r.name === name);
+    return response ? responseText(response) : name;
+  };
+  document.getElementById("identifiability-alone").hidden = !several;
   document.getElementById("identifiability-basis").textContent = entries.length
-    ? `From ${identified.simulations} successful simulations: ${identified.method}.`
+    ? `From ${identified.simulations} successful simulations: ${several
+      ? `each experiment's response modelled on its own (${alone.map((x) => label(x.response)).join("; ")});` +
+        " the verdict is the experiments' together, from the sets that match them all"
+      : identified.method}.`
     : (identified.reason || "Not available yet.");
   const rows = entries.map((entry) => {
     const p = PARAMETERS.find((q) => q.key === entry.name);
     const range = entry.matching_range;
-    return el("tr", { "data-parameter": entry.name },
+    const cells = [
       el("td", { text: p ? p.title : entry.name }),
-      el("td", {}, el("span", { class: `status ${VERDICT_CLASS[entry.verdict] || ""}`, text: entry.verdict })),
+      el("td", {}, verdictBadge(entry.verdict, entry.pinned_together ? "pinned together" : entry.verdict)),
       el("td", { class: "num", text: fmt(entry.total, 2) }),
       el("td", { class: "num", text: fmt(entry.first_order, 2) }),
       el("td", { class: "num", text: fmt(entry.matching_spread, 2) }),
-      el("td", { class: "num", text: range ? `${fmt(range[0], 3)} – ${fmt(range[1], 3)}` : "–" }));
+      el("td", { class: "num", text: range ? `${fmt(range[0], 3)} – ${fmt(range[1], 3)}` : "–" }),
+    ];
+    if (several) {
+      cells.push(el("td", { class: "alone" }, ...alone.flatMap((x, i) => {
+        const own = x.parameters.find((q) => q.name === entry.name);
+        return [i ? el("br") : null, `${label(x.response)}: `, verdictBadge(own.verdict)];
+      })));
+    }
+    return el("tr", { "data-parameter": entry.name }, ...cells);
   });
   document.querySelector("#identifiability tbody").replaceChildren(...(rows.length ? rows
-    : [el("tr", {}, el("td", { colspan: 6, class: "muted", text: "None yet." }))]));
+    : [el("tr", {}, el("td", { colspan: several ? 7 : 6, class: "muted", text: "None yet." }))]));
 }
 
 async function refresh() {
@@ -288,12 +312,12 @@ async function refresh() {
     // a study seen finished must not stop polling before its last trial changes were read.
     [study, changed] = await Promise.all([api(base), loadTrialChanges()]);
     responses = experimentResponses(study);
-    const first = responses[0] ? responseText(responses[0]) : "the response";
+    const measured = responses.length === 1 ? responseText(responses[0]) : "the most sensitive response";
     document.getElementById("identifiability-help").textContent =
-      `Total index: the share of ${first}'s variance over the search box due to the parameter, ` +
-      `interactions included (near 0: no ${first} experiment can tell its value). Matching spread: ` +
-      "the matching sets' range as a share of the searched range (near 1: any value in the bounds " +
-      "reproduces the experiment).";
+      `Total index: the share of ${measured}'s variance over the search box due to the parameter, ` +
+      `interactions included (near 0: no experiment on ${measured} can tell its value). Matching ` +
+      "spread: the matching sets' range as a share of the searched range (near 1: any value in the " +
+      "bounds reproduces the experiments).";
     // Pareto membership is computed on the study's own f2, so show that axis first.
     document.getElementById("pareto-x").value =
       study.definition?.objective_time === "wall" ? "wall_time_s" : "cost";
