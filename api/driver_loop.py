@@ -83,6 +83,10 @@ class _Routed:
     def in_flight(self) -> set[str]:
         return self.executor.in_flight()
 
+    def waiting(self) -> dict[str, str]:
+        """Why trials of an engine wait (no worker has it), for the driver to store with them."""
+        return getattr(self.executor, "waiting", dict)()
+
     def cancel(self, trial_ids: Sequence[str]) -> None:
         self.executor.cancel(trial_ids)
 
