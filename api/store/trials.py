@@ -91,9 +91,10 @@ class TrialStore(StoreBase):
         )
 
     def mark_running(self, trial_id: str, worker: str | None = None) -> None:
+        """A worker took it: whatever it waited for (``mark_queued``'s message) is over."""
         self._move(
             [trial_id], (TrialState.PENDING, TrialState.QUEUED),
-            state=TrialState.RUNNING.value, worker=worker, started_at=utcnow(),
+            state=TrialState.RUNNING.value, worker=worker, started_at=utcnow(), message="",
         )
 
     def requeue(self, trial_ids: Sequence[str]) -> None:

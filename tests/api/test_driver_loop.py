@@ -88,6 +88,34 @@ def test_cancel_removes_a_studys_jobs_from_the_redis_queue(store, redis_url):
         executor.close()
 
 
+@pytest.mark.redis
+def test_a_trial_for_an_engine_no_worker_has_stays_queued_saying_so_until_a_worker_takes_it(
+    store, redis_url, client, keys
+):
+    from worker.rq_executor import RqExecutor
+
+    executor = RqExecutor.from_url(redis_url, "demcal-engine-test")
+    try:
+        study_id = create(
+            store, engine="liggghts", scenario={"kind": "angle_of_repose"},
+            experiment={"response": "angle_deg", "measured": [30.0]},
+        )
+        loop_on(store, executor).tick()  # no worker takes demcal-engine-test.liggghts
+
+        trials = client.get(f"/api/v1/studies/{study_id}/trials", headers=keys.auth()).json()["items"]
+        assert len(trials) == 6
+        for trial in trials:
+            assert (trial["state"], trial["engine"]) == ("queued", "liggghts")
+            assert trial["message"].startswith("waiting for a worker with engine 'liggghts': no worker takes "
+                                               "queue 'demcal-engine-test.liggghts'")
+        store.mark_running(trials[0]["id"], "worker-with-liggghts")
+        base = f"/api/v1/studies/{study_id}/trials"
+        running = client.get(f"{base}/{trials[0]['id']}", headers=keys.auth()).json()
+        assert (running["state"], running["message"]) == ("running", "")
+    finally:
+        executor.close()
+
+
 @pytest.mark.slow
 def test_cancel_frees_the_local_pool_at_once_for_the_next_study(store):
     from worker.local import LocalPoolExecutor
