@@ -149,6 +149,7 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         "status": study.status.value,
         "message": study.message,
         "response": experiment.response,
+        "responses_measured": _measured_text(definition),
         "target": experiment.target(),
         "tolerance": definition.match_tolerance(),
         "f1_rule": f1_rule(definition),
@@ -173,6 +174,14 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         ).as_json(),
         "identifiability": study_identifiability(evaluations, definition, space),
     }
+
+
+def _measured_text(definition: StudyDefinition) -> str:
+    """What a successful run measured, as views name it: 'N_t', 'angle of repose', 'every response'."""
+    if len(definition.experiments) > 1:
+        return "every response"
+    declared = definition.declared_responses().get(definition.experiment.response)
+    return (declared.label or declared.name) if declared else definition.experiment.response
 
 
 def write_trials_csv(path: Path, definition: StudyDefinition, records: list[TrialRecord]) -> None:
@@ -305,7 +314,8 @@ def write_pareto_png(
             color=colour,
             s=22,
         )
-    _failure_strip(left_failed, statuses, f"failed individuals: {len(failed)} (not ranked)")
+    measured = summary_json.get("responses_measured") or "N_t"
+    _failure_strip(left_failed, statuses, f"failed individuals: {len(failed)} (not ranked)", measured)
 
     by_generation: dict[int, list[int]] = {}
     failed_by_generation: dict[int, dict[str, int]] = {}
@@ -349,14 +359,14 @@ def write_pareto_png(
     plt.close(fig)
 
 
-def _failure_strip(ax, statuses: list[str], title: str) -> None:
+def _failure_strip(ax, statuses: list[str], title: str, measured: str) -> None:
     """One row per failed status, labelled, with the count in the title; 'none' when empty."""
     ax.set_yticks(range(len(statuses)), statuses, fontsize=7)
     ax.set_ylim(-0.7, max(len(statuses), 1) - 0.3)
     ax.set_title(title, fontsize=9, loc="left")
     if not statuses:
         ax.set_yticks([])
-        ax.text(0.5, 0.4, "every run measured N_t", transform=ax.transAxes, ha="center", fontsize=8)
+        ax.text(0.5, 0.4, f"every run measured {measured}", transform=ax.transAxes, ha="center", fontsize=8)
 
 
 def write_results(directory: Path, study: StudyRecord, records: list[TrialRecord]) -> dict[str, Any]:

@@ -281,7 +281,7 @@ def _report(console, store, study_id: str, results: Path) -> None:
             _figure(member["f2"]),
         )
     console.print(table)
-    _report_failures(console, summary["failures"])
+    _report_failures(console, summary["failures"], summary.get("responses_measured", "N_t"))
     recommendation = summary["recommendation"]
     if recommendation is None:
         console.print(
@@ -325,15 +325,15 @@ def _f1(member: dict) -> str:
     return f"{member['f1']:.3g} [{interval[0]:.2g}-{interval[1]:.2g}]"
 
 
-def _report_failures(console, failures: dict) -> None:
+def _report_failures(console, failures: dict, measured: str) -> None:
     """The runs that measured nothing, apart from the front: one row per status with its count
     and the first such run's message (what to change)."""
     if not failures["total"]:
-        console.print("failed: 0 (every simulation measured N_t)")
+        console.print(f"failed: 0 (every simulation measured {measured})")
         return
     from rich.table import Table
 
-    table = Table(title=failures["text"] + ": not ranked, no N_t", title_justify="left")
+    table = Table(title=failures["text"] + f": not ranked, no {measured}", title_justify="left")
     table.add_column("status")
     table.add_column("runs", justify="right")
     table.add_column("first message", overflow="fold")
@@ -389,11 +389,11 @@ def _validation_table(console, summary: dict) -> None:
         if summary.get("validation_status"):
             console.print(f"Recommendation {summary['validation_status']}.")
         return
-    measured = summary["measured"]
+    measured, response = summary["measured"], summary.get("responses_measured", "N_t")
     table = Table(
-        title=f"Validation on fresh seeds (experiment: median {_median(measured):g}, N_t {measured})"
+        title=f"Validation on fresh seeds (experiment: median {_median(measured):g}, {response} {measured})"
     )
-    for column in ("individual", "E [Pa]", "e", "mu", "search f1", "fresh N_t", "median [90 %]",
+    for column in ("individual", "E [Pa]", "e", "mu", "search f1", f"fresh {response}", "median [90 %]",
                    "W1", "f1 [90 %]", "verdict"):  # fmt: skip
         table.add_column(column, justify="right")
     for row in rows:

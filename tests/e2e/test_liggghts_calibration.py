@@ -54,6 +54,8 @@ def test_a_small_liggghts_case_calibrates_end_to_end(tmp_path):
     [study_id] = store.studies_in([StudyStatus.DONE])
     records = store.trials(study_id)
     assert len(records) == 6, output
+    assert "failed: 0 (every simulation measured angle of repose)" in output
+    assert "N_t" not in output  # the report names the heap's response, not the feeder's
     for record in records:
         assert record.spec.engine == "liggghts"
         assert record.result.engine == "liggghts" and record.result.ok, record.result.message
