@@ -7,7 +7,8 @@ from PIL import Image
 
 from dem import quaternion
 from dem.result import SimulationStatus
-from dem.scenarios.feeder import FeederConfig, run_feeder
+from dem.scenarios.feeder import run_feeder
+from dem.scenarios.feeder_config import FeederConfig
 from dem.scenarios.render import (
     GONE,
     IN_TRAY,
