@@ -48,7 +48,7 @@ CLOGGED_SEED = 0
 
 
 def _specs(snapshot_dir: Path) -> tuple[list[TrialSpec], TrialSpec]:
-    quick = load_study_file(QUICK_STUDY).scenario
+    quick = load_study_file(QUICK_STUDY).scenario.model_dump(mode="json")
     truth = [
         TrialSpec(f"truth-{seed}", "figures", 0, 0, 0, seed, TRUTH, quick)
         for seed in range(FIRST_SEED, FIRST_SEED + TRUTH_SEEDS)
