@@ -266,15 +266,15 @@ function verdictBadge(verdict, text) {
 
 function renderIdentifiability(identified) {
   const entries = identified.parameters || [];
-  // Several experiments: the verdict is theirs together, and each one's own verdict is shown
-  // beside it, so that a parameter pinned only by the experiments together says so.
+  // Several experiments: the verdict is theirs together; each one's own verdict is in a second
+  // table, so that a parameter pinned only by the experiments together says so.
   const alone = (identified.experiments || []).filter((x) => x.parameters.length);
   const several = alone.length > 1;
   const label = (name) => {
     const response = responses.find((r) => r.name === name);
     return response ? responseText(response) : name;
   };
-  document.getElementById("identifiability-alone").hidden = !several;
+  const title = (name) => PARAMETERS.find((q) => q.key === name)?.title || name;
   document.getElementById("identifiability-basis").textContent = entries.length
     ? `From ${identified.simulations} successful simulations: ${several
       ? `each experiment's response modelled on its own (${alone.map((x) => label(x.response)).join("; ")});` +
@@ -282,26 +282,26 @@ function renderIdentifiability(identified) {
       : identified.method}.`
     : (identified.reason || "Not available yet.");
   const rows = entries.map((entry) => {
-    const p = PARAMETERS.find((q) => q.key === entry.name);
     const range = entry.matching_range;
-    const cells = [
-      el("td", { text: p ? p.title : entry.name }),
+    return el("tr", { "data-parameter": entry.name },
+      el("td", { text: title(entry.name) }),
       el("td", {}, verdictBadge(entry.verdict, entry.pinned_together ? "pinned together" : entry.verdict)),
       el("td", { class: "num", text: fmt(entry.total, 2) }),
       el("td", { class: "num", text: fmt(entry.first_order, 2) }),
       el("td", { class: "num", text: fmt(entry.matching_spread, 2) }),
-      el("td", { class: "num", text: range ? `${fmt(range[0], 3)} – ${fmt(range[1], 3)}` : "–" }),
-    ];
-    if (several) {
-      cells.push(el("td", { class: "alone" }, ...alone.flatMap((x, i) => {
-        const own = x.parameters.find((q) => q.name === entry.name);
-        return [i ? el("br") : null, `${label(x.response)}: `, verdictBadge(own.verdict)];
-      })));
-    }
-    return el("tr", { "data-parameter": entry.name }, ...cells);
+      el("td", { class: "num", text: range ? `${fmt(range[0], 3)} – ${fmt(range[1], 3)}` : "–" }));
   });
   document.querySelector("#identifiability tbody").replaceChildren(...(rows.length ? rows
-    : [el("tr", {}, el("td", { colspan: several ? 7 : 6, class: "muted", text: "None yet." }))]));
+    : [el("tr", {}, el("td", { colspan: 6, class: "muted", text: "None yet." }))]));
+  const table = document.getElementById("identifiability-alone");
+  table.hidden = !several;
+  if (!several) return;
+  table.querySelector("thead tr").replaceChildren(el("th", { text: "Parameter" }),
+    ...alone.map((x) => el("th", { text: label(x.response) })));
+  const own = (x, name) => x.parameters.find((q) => q.name === name).verdict;
+  table.querySelector("tbody").replaceChildren(...entries.map((entry) =>
+    el("tr", { "data-parameter": entry.name }, el("td", { text: title(entry.name) }),
+      ...alone.map((x) => el("td", {}, verdictBadge(own(x, entry.name)))))));
 }
 
 async function refresh() {
