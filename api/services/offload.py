@@ -7,10 +7,11 @@ server's share of the cores for that long, and every poll of every dashboard que
 (``benchmarks/README.md``). In a child process niced by ``NICE``, the scheduler serves the
 polls first and the build takes what is left.
 
-The child is started on first use (spawn: no state inherited from the server) and reads the
-database itself; a build's function and arguments must pickle. A database the child cannot open
-(SQLite in memory) is built on the calling thread. A child that died is replaced at the next
-build. What it must not do: decide what a view contains (the caller's function does).
+The child is started on first use (spawn: no state inherited from the server), ends when the
+server is gone, and reads the database itself; a build's function and arguments must pickle. A
+database the child cannot open (SQLite in memory) is built on the calling thread. A child that
+died is replaced at the next build. What it must not do: decide what a view contains (the
+caller's function does).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -44,7 +46,7 @@ def in_child(build: Callable[[SqlStore, str], bytes], store: SqlStore, study_id:
     with _lock:
         if _pool is None:
             _pool = ProcessPoolExecutor(
-                1, mp_context=get_context("spawn"), initializer=os.nice, initargs=(NICE,)
+                1, mp_context=get_context("spawn"), initializer=_start_child, initargs=(os.getpid(),)
             )
         pool = _pool
     try:
@@ -55,6 +57,20 @@ def in_child(build: Callable[[SqlStore, str], bytes], store: SqlStore, study_id:
             if _pool is pool:
                 _pool = None
         raise
+
+
+def _start_child(server_pid: int) -> None:
+    """Lower the child's priority, and end it when the server is gone: a worker of a process pool
+    holds both ends of its task pipe, so it never sees the server die (SIGKILL, or a SIGTERM that
+    outlived its grace period) and would wait for tasks forever."""
+    os.nice(NICE)
+
+    def watch() -> None:
+        while os.getppid() == server_pid:
+            time.sleep(1.0)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="server-watch", daemon=True).start()
 
 
 _stores: dict[str, SqlStore] = {}  # in the child: one store per database
