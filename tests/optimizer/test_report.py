@@ -18,12 +18,18 @@ TARGET = 4  # the paper's median 3.5, rounded half up
 
 def matching_where_mu_above(threshold: float):
     """The synthetic feeder with N_t exactly on target where mu > threshold and 8 items off
-    elsewhere, so which trials match is known from their parameters alone, whatever the seed."""
+    elsewhere, so which trials match is known from their parameters alone, whatever the seed.
+    The runs off target are faster than any on it, so a recommendation that ignored the match
+    would pick one of them."""
 
     def respond(spec):
-        n_remaining = TARGET if spec.params["mu"] > threshold else TARGET + 8
-        update = {"n_remaining": n_remaining, "responses": {"n_remaining": n_remaining}}
-        return synthetic_result(spec).model_copy(update=update)
+        result = synthetic_result(spec)
+        if spec.params["mu"] > threshold:
+            n_remaining, times = TARGET, {}
+        else:
+            n_remaining, times = TARGET + 8, {"wall_time_s": 0.0, "cost": 0.0}
+        update = {"n_remaining": n_remaining, "responses": {"n_remaining": n_remaining}, **times}
+        return result.model_copy(update=update)
 
     return respond
 
@@ -52,6 +58,7 @@ def test_results_folder_holds_every_trial_and_the_recommendation(tmp_path, small
     assert matching and len(matching) < len(rows)
     assert all(float(row["f1"]) == 0 for row in matching)
     fastest = min(matching, key=lambda row: float(row["f2"]))
+    assert min(rows, key=lambda row: float(row["f2"])) not in matching  # only the match rule excludes it
     assert summary["recommendation"]["trial_ids"] == [fastest["trial_id"]]
     assert summary["recommendation"]["f1"] == 0
     first = min(int(row["individual"]) for row in matching)
