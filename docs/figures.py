@@ -20,12 +20,20 @@ changes a file only with ``--picture``.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import statistics
 import sys
 import tempfile
 import tomllib
 from pathlib import Path
+
+# The feeder is chaotic: a difference of 1e-17 in a clump's principal axes (OpenBLAS picks its
+# kernels by CPU unless told, and an eigen-solver's last bit follows them) changes every figure.
+# The figures are therefore made with one named kernel set and with clumps built afresh in a
+# folder of their own, never read from a cache another process filled.
+os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
+os.environ["DEMCAL_DATA_DIR"] = tempfile.mkdtemp(prefix="demcal-figures-")
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
