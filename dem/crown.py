@@ -77,13 +77,13 @@ def _height_fit(pts, m, tol):
 
 
 @numba.njit(**JIT_FLAGS)
-def _centre(p, s, nx, ny, nz, ux, uy, uz, wx, wy, wz):
-    """(t, pu, pw): a shape's centre p in the contact frame, t = the supporting plane's height s
-    above it along n."""
+def _centre(p, s, n, u, w):
+    """(t, pu, pw): a shape's centre p in the contact frame (n, u, w: 3-tuples), t = the
+    supporting plane's height s above it along n."""
     return (
-        s - (p[0] * nx + p[1] * ny + p[2] * nz),
-        p[0] * ux + p[1] * uy + p[2] * uz,
-        p[0] * wx + p[1] * wy + p[2] * wz,
+        s - (p[0] * n[0] + p[1] * n[1] + p[2] * n[2]),
+        p[0] * u[0] + p[1] * u[1] + p[2] * u[2],
+        p[0] * w[0] + p[1] * w[1] + p[2] * w[2],
     )
 
 
@@ -222,28 +222,31 @@ def _tilt(hull_a, ha, hull_b, hb, u, w, c, eps):
 
 
 @numba.njit(**JIT_FLAGS)
-def crowned_contact(
-    va, sa, ca, rot_a, pa, crown_a, vb, sb, cb, rot_b, pb, crown_b, ax, ay, az, bx, by, bz, tol, work
-):
-    """Crowned distance D of two separated convex shapes whose closest points (``gjk_distance``)
-    are a and b, its minimiser and the direction of the force: ``(D, xx, xy, xz, yx, yy, yz,
-    ex, ey, ez)``, x* on A, y* on B, e the unit gradient of D with respect to A's position.
+def crowned_contact(va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work):
+    """Crowned distance D of two separated convex shapes ``a`` and ``b`` (``dem.convex.Core``s of
+    the vertex arrays va, vb) whose closest points (``gjk_distance``, 3-tuples) are p_a and p_b,
+    its minimiser and the direction of the force: ``(D, xx, xy, xz, yx, yy, yz, ex, ey, ez)``,
+    x* on A, y* on B, e the unit gradient of D with respect to A's position.
 
-    ``crown_*`` = (kappa, kappa h^2, ...) of each shape about its centre ``p*`` (kappa 0: not
-    crowned, as a sphere or a wall); ``tol`` bounds how far above its supporting plane the
-    minimiser can lie (the crown's variation over the pieces)."""
+    ``crown_*`` = (kappa, kappa h^2, ...) of each shape about its centre, the core's position
+    (kappa 0: not crowned, as a sphere or a wall); ``tol`` bounds how far above its supporting
+    plane the minimiser can lie (the crown's variation over the pieces)."""
+    ax, ay, az = p_a
+    bx, by, bz = p_b
+    pa, pb = a.pos, b.pos
     nx, ny, nz = ax - bx, ay - by, az - bz
     d = math.sqrt(nx * nx + ny * ny + nz * nz)
     nx, ny, nz = nx / d, ny / d, nz / d
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
-    ha, hb, eps = feature_hulls(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, d, nx, ny, nz, tol, work)
+    n, u, w = (nx, ny, nz), (ux, uy, uz), (wx, wy, wz)
+    ha, hb, eps = feature_hulls(va, a, vb, b, d, n, tol, work)
     alpha_a, bua, bwa, flat_a = _height_fit(work[0], ha, tol)
     alpha_b, bub, bwb, flat_b = _height_fit(work[1], hb, tol)
     s_a = ax * nx + ay * ny + az * nz  # A's supporting plane along n
     s_b = bx * nx + by * ny + bz * nz
     ka, kb = crown_a[0], crown_b[0]
-    ta, pua, pwa = _centre(pa, s_a, nx, ny, nz, ux, uy, uz, wx, wy, wz)
-    tb, pub, pwb = _centre(pb, s_b, nx, ny, nz, ux, uy, uz, wx, wy, wz)
+    ta, pua, pwa = _centre(pa, s_a, n, u, w)
+    tb, pub, pwb = _centre(pb, s_b, n, u, w)
     c = (d, alpha_a, bua, bwa, ta, pua, pwa, ka, alpha_b, bub, bwb, tb, pub, pwb, kb)
     # Keep the hull that the clipping overwrites (in work[2]) for the tilt of the normal below.
     if not (flat_a and flat_b):  # curved features: their closest points

@@ -149,26 +149,23 @@ def closest_point_on_facet(px, py, pz, facets, f, dx, dy, dz):
     """
     normal = facets.normal
     return _closest_point_on_triangles(
-        px - dx,
-        py - dy,
-        pz - dz,
+        (px - dx, py - dy, pz - dz),
         facets.tri,
         facets.tri_start[f],
         facets.tri_count[f],
-        normal[f, 0],
-        normal[f, 1],
-        normal[f, 2],
+        (normal[f, 0], normal[f, 1], normal[f, 2]),
         facets.offset[f],
-        dx,
-        dy,
-        dz,
+        (dx, dy, dz),
     )
 
 
 @numba.njit(**JIT_FLAGS)
-def _closest_point_on_triangles(qx, qy, qz, tri, start, count, nx, ny, nz, offset, dx, dy, dz):
+def _closest_point_on_triangles(q, tri, start, count, n, offset, disp):
     """``closest_point_on_facet`` for q = p - displacement, the facet being triangles
-    ``start:start + count`` of ``tri`` in the plane n . x = offset."""
+    ``start:start + count`` of ``tri`` in the plane n . x = offset (q, n, disp: 3-tuples)."""
+    qx, qy, qz = q
+    nx, ny, nz = n
+    dx, dy, dz = disp
     best = np.inf
     bx = by = bz = 0.0
     for t in range(start, start + count):

@@ -35,10 +35,11 @@ import numba
 
 from dem.conf import JIT_FLAGS
 from dem.contact import PairLaw, patch_damping, share_weight, sphere_contact_force
+from dem.convex import place
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
 from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS
-from dem.rounded_contact import facet_geometry, pair_geometry
+from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry
 
 
 @numba.njit(**JIT_FLAGS)
@@ -211,7 +212,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         nx, ny, nz = dx / d, dy / d, dz / d
         pp_delta[p] = delta
         if single:
-            _sphere_pair_force(p, i, j, g, nx, ny, nz, delta, 1.0, bodies, spheres, pairs, hist_dt)
+            _sphere_pair_force(p, g, (i, j), (nx, ny, nz), delta, 1.0, bodies, spheres, pairs, hist_dt)
             n_contacts += 1
             continue
         pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = nx, ny, nz
@@ -232,7 +233,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         nx, ny, nz = pp_n[p, 0], pp_n[p, 1], pp_n[p, 2]
         weight = share_weight(delta) / grp_sum[g]
         if not rounded:
-            _sphere_pair_force(p, i, j, g, nx, ny, nz, delta, weight, bodies, spheres, pairs, hist_dt)
+            _sphere_pair_force(p, g, (i, j), (nx, ny, nz), delta, weight, bodies, spheres, pairs, hist_dt)
             n_contacts += 1
             continue
         ba, bb = sbody[i], sbody[j]
@@ -259,10 +260,13 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _sphere_pair_force(p, i, j, g, nx, ny, nz, delta, weight, bodies, spheres, pairs, hist_dt):
-    """Applies the force of listed pair p, two plain spheres i and j of group g touching with
-    overlap ``delta`` along n (j -> i) and ``weight`` of their body pair's law, at the middle of
-    the overlap. Inlined: its three containers would cost more to pass than the force itself."""
+def _sphere_pair_force(p, g, rows, n, delta, weight, bodies, spheres, pairs, hist_dt):
+    """Applies the force of listed pair p, two plain spheres (``rows`` i and j) of group g
+    touching with overlap ``delta`` along n (3-tuple, j -> i) and ``weight`` of their body pair's
+    law, at the middle of the overlap. Inlined: its three containers would cost more to pass than
+    the force itself."""
+    i, j = rows
+    nx, ny, nz = n
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
     pos, vel, omega, force, torque = bodies.pos, bodies.vel, bodies.omega, bodies.force, bodies.torque
     ba, bb = sbody[i], sbody[j]
@@ -287,18 +291,22 @@ def _rounded_pair(i, j, bodies, spheres, axis):
     ba, bb = spheres.body[i], spheres.body[j]
     core, start, count = spheres.core, spheres.core_start, spheres.core_count
     if count[i] > 0:
-        va, sa, ca, rot_a, pa = core, start[i], count[i], bodies.rot[ba], bodies.pos[ba]
+        va, a = core, place(start[i], count[i], bodies.rot[ba], bodies.pos[ba])
     else:
-        va, sa, ca, rot_a, pa = spheres.x, i, 1, spheres.eye, spheres.zero
+        va, a = spheres.x, place(i, 1, spheres.eye, spheres.zero)
     if count[j] > 0:
-        vb, sb, cb, rot_b, pb = core, start[j], count[j], bodies.rot[bb], bodies.pos[bb]
+        vb, b = core, place(start[j], count[j], bodies.rot[bb], bodies.pos[bb])
     else:
-        vb, sb, cb, rot_b, pb = spheres.x, j, 1, spheres.eye, spheres.zero
+        vb, b = spheres.x, place(j, 1, spheres.eye, spheres.zero)
     ra, rb = spheres.rounding[i], spheres.rounding[j]
-    crown_a, crown_b = spheres.crown[i], spheres.crown[j]
-    return pair_geometry(
-        va, sa, ca, rot_a, pa, ra, crown_a, vb, sb, cb, rot_b, pb, rb, crown_b, axis, spheres.work
-    )
+    return pair_geometry(va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, spheres.work)
+
+
+@numba.njit(**JIT_FLAGS)
+def _crown(spheres, i):
+    """Sphere row i's crown as a 3-tuple (``dem/crown.py``)."""
+    c = spheres.crown
+    return c[i, 0], c[i, 1], c[i, 2]
 
 
 @numba.njit(**JIT_FLAGS)
@@ -337,23 +345,17 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
             continue
         if spheres.core_count[i] > 0:
             b = sbody[i]
-            delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face = facet_geometry(
-                spheres.core,
-                spheres.core_start[i],
-                spheres.core_count[i],
-                bodies.rot[b],
-                pos[b],
-                spheres.rounding[i],
-                spheres.crown[i],
-                tri_flat,
+            core = place(spheres.core_start[i], spheres.core_count[i], bodies.rot[b], pos[b])
+            normal = facets.normal
+            facet = WallFacet(
                 facets.tri_start[f],
                 facets.tri_count[f],
-                wall_disp[w],
-                facets.normal[f],
+                (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
+                (normal[f, 0], normal[f, 1], normal[f, 2]),
                 facets.offset[f],
-                spheres.eye,
-                spheres.zero,
-                spheres.work,
+            )
+            delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face = facet_geometry(
+                spheres.core, core, spheres.rounding[i], _crown(spheres, i), tri_flat, facet, spheres.work
             )
             if delta <= 0.0:
                 continue

@@ -246,7 +246,7 @@ def deform_polyhedron(
 def surface_gap(poly: Polyhedron, mesh: trimesh.Trimesh, n_samples: int = 4000, seed: int = 1):
     """(largest, mean) distance from points on the mesh surface to the rounded shape's surface, m:
     how far the shape departs from the mesh (compare ``dem.clumping.clump_fit``)."""
-    from dem.convex import gjk_distance
+    from dem.convex import gjk_distance, place
 
     points, _ = trimesh.sample.sample_surface_even(mesh, n_samples, seed=seed)
     local = np.ascontiguousarray((np.asarray(points) - poly.com) @ poly.axes)
@@ -254,7 +254,7 @@ def surface_gap(poly: Polyhedron, mesh: trimesh.Trimesh, n_samples: int = 4000, 
     gaps = np.empty(len(local))
     for s in range(len(local)):
         nearest = min(
-            gjk_distance(local, s, 1, eye, origin, poly.core, start, count, eye, origin)[0]
+            gjk_distance(local, place(s, 1, eye, origin), poly.core, place(start, count, eye, origin))[0]
             for start, count in zip(poly.piece_start, poly.piece_count, strict=True)
         )
         gaps[s] = abs(nearest - poly.rounding)

@@ -19,32 +19,57 @@ Cheap rejections come first, so GJK runs only for pieces that nearly touch:
 
 A facet of several coplanar triangles is one contact: D is the smallest over its triangles, and
 the patch combines the triangles near that distance weighted by their patch areas (or lengths).
-Pure numba; no allocation.
+A core is a vertex array and a ``dem.convex.Core``, a crown a 3-tuple, a facet the wall's
+triangle array and a ``WallFacet``. Pure numba; no allocation.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
-from dem.convex import contact_patch, gjk_distance, plane_basis, support
+from dem.convex import Core, contact_patch, gjk_distance, plane_basis, support
 from dem.crown import crowned_contact
+
+IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # walls translate, never turn
+NO_CROWN = (0.0, 0.0, 0.0)  # a facet's
+
+
+class WallFacet(NamedTuple):
+    """A planar wall facet where it is now: triangles ``start .. start + count`` of the wall
+    triangle array (three vertex rows each, passed beside it) moved by the wall's ``disp``; its
+    plane is ``normal . x = offset`` at the reference position. Plain numbers, as ``Core``."""
+
+    start: int
+    count: int
+    disp: tuple  # (x, y, z)
+    normal: tuple  # (x, y, z)
+    offset: float
 
 
 @numba.njit(**JIT_FLAGS)
-def _extent(verts, start, count, rot, pos, nx, ny, nz):
+def _triangle(facet, t):
+    """Triangle t of the wall triangle array as a placed core."""
+    return Core(3 * t, 3, IDENTITY, facet.disp)
+
+
+@numba.njit(**JIT_FLAGS)
+def _extent(verts, core, nx, ny, nz):
     """(min, max) of the placed vertices' projections on n."""
-    hx, hy, hz = support(verts, start, count, rot, pos[0], pos[1], pos[2], nx, ny, nz)
-    lx, ly, lz = support(verts, start, count, rot, pos[0], pos[1], pos[2], -nx, -ny, -nz)
+    hx, hy, hz = support(verts, core, nx, ny, nz)
+    lx, ly, lz = support(verts, core, -nx, -ny, -nz)
     return lx * nx + ly * ny + lz * nz, hx * nx + hy * ny + hz * nz
 
 
 @numba.njit(**JIT_FLAGS)
-def pair_geometry(va, sa, ca, rot_a, pa, ra, crown_a, vb, sb, cb, rot_b, pb, rb, crown_b, axis, work):
-    """Contact of rounded shapes A and B: ``(delta, d, nx, ny, nz, cx, cy, cz, s_uu, s_uw,
-    s_ww)``, delta the crowned overlap and c its contact point (``dem.crown.crowned_contact``),
-    s the patch's second moments (``dem.convex.contact_patch``).
+def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, work):
+    """Contact of rounded shapes A and B (cores ``a`` and ``b`` of the vertex arrays va and vb,
+    rounding radii ``ra`` and ``rb``, crowns ``crown_*``): ``(delta, d, nx, ny, nz, cx, cy, cz,
+    s_uu, s_uw, s_ww)``, delta the crowned overlap and c its contact point
+    (``dem.crown.crowned_contact``), s the patch's second moments (``dem.convex.contact_patch``).
 
     delta <= 0: apart (n and c are then not computed). d = 0 with delta > 0: the cores
     intersect (an overlap beyond the rounding; the caller reports it). ``axis`` (3,) is the
@@ -52,50 +77,48 @@ def pair_geometry(va, sa, ca, rot_a, pa, ra, crown_a, vb, sb, cb, rot_b, pb, rb,
     """
     reach = ra + rb
     if axis[0] != 0.0 or axis[1] != 0.0 or axis[2] != 0.0:
-        lo_a, _ = _extent(va, sa, ca, rot_a, pa, axis[0], axis[1], axis[2])
-        _, hi_b = _extent(vb, sb, cb, rot_b, pb, axis[0], axis[1], axis[2])
+        lo_a, _ = _extent(va, a, axis[0], axis[1], axis[2])
+        _, hi_b = _extent(vb, b, axis[0], axis[1], axis[2])
         gap = lo_a - hi_b
         if gap > reach:
             return reach - gap, gap, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    d, ax, ay, az, bx, by, bz = gjk_distance(va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb)
+    d, ax, ay, az, bx, by, bz = gjk_distance(va, a, vb, b)
     if d > 0.0:
         axis[0], axis[1], axis[2] = (ax - bx) / d, (ay - by) / d, (az - bz) / d
     delta = reach - d
     if delta <= 0.0 or d == 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     tol = 4.0 * (crown_a[2] + crown_b[2])
+    p_a, p_b = (ax, ay, az), (bx, by, bz)
     crowned, xx, xy, xz, yx, yy, yz, ex, ey, ez = crowned_contact(
-        va, sa, ca, rot_a, pa, crown_a, vb, sb, cb, rot_b, pb, crown_b, ax, ay, az, bx, by, bz, tol, work
+        va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work
     )
     delta = reach - crowned
     if delta <= 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(
-        va, sa, ca, rot_a, pa, vb, sb, cb, rot_b, pb, ax, ay, az, bx, by, bz, delta, work
-    )
+    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, vb, b, p_a, p_b, delta, work)
     cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww
 
 
 @numba.njit(**JIT_FLAGS)
-def facet_geometry(
-    va, sa, ca, rot_a, pa, ra, crown_a, tri_verts, t_start, t_count, disp, normal, offset, eye, zero, work
-):
-    """Contact of rounded shape A with a facet (triangles ``t_start .. t_start + t_count`` of the
-    flat vertex array ``tri_verts``, three rows each, displaced by ``disp``; plane
-    ``normal . x = offset`` at the reference position): ``(delta, d, nx, ny, nz, cx, cy, cz,
-    s_uu, s_uw, s_ww, is_face)``, delta the crowned overlap (the least crowned distance over the
-    triangles, ``dem.crown``) and c its contact point. ``is_face``: the closest point of the
-    facet is inside it (not on its boundary). ``zero`` (3,): the facet's crown (none).
+def facet_geometry(va, a, ra, crown_a, tri, facet, work):
+    """Contact of rounded shape A (core ``a`` of the vertex array va, rounding radius ``ra``,
+    crown ``crown_a``) with a ``WallFacet`` of the triangle array ``tri``: ``(delta, d, nx, ny,
+    nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face)``, delta the crowned overlap (the least crowned
+    distance over the triangles, ``dem.crown``) and c its contact point. ``is_face``: the closest
+    point of the facet is inside it (not on its boundary).
     """
+    disp, normal, offset = facet.disp, facet.normal, facet.offset
+    t_start, t_count = facet.start, facet.count
     shift = normal[0] * disp[0] + normal[1] * disp[1] + normal[2] * disp[2]
-    lo, hi = _extent(va, sa, ca, rot_a, pa, normal[0], normal[1], normal[2])
+    lo, hi = _extent(va, a, normal[0], normal[1], normal[2])
     if lo - (offset + shift) > ra or (offset + shift) - hi > ra:
         return -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
     best = np.inf
     ax = ay = az = bx = by = bz = 0.0
     for t in range(t_start, t_start + t_count):
-        d, qx, qy, qz, wx, wy, wz = gjk_distance(va, sa, ca, rot_a, pa, tri_verts, 3 * t, 3, eye, disp)
+        d, qx, qy, qz, wx, wy, wz = gjk_distance(va, a, tri, _triangle(facet, t))
         if d < best:
             best, ax, ay, az, bx, by, bz = d, qx, qy, qz, wx, wy, wz
     delta = ra - best
@@ -109,30 +132,11 @@ def facet_geometry(
     crowned = np.inf
     nx = ny = nz = cx = cy = cz = 0.0
     for t in range(t_start, t_start + t_count):
-        d, qx, qy, qz, wx, wy, wz = gjk_distance(va, sa, ca, rot_a, pa, tri_verts, 3 * t, 3, eye, disp)
+        d, qx, qy, qz, wx, wy, wz = gjk_distance(va, a, tri, _triangle(facet, t))
         if d > best + tol or d == 0.0:
             continue
         value, xx, xy, xz, yx, yy, yz, ex, ey, ez = crowned_contact(
-            va,
-            sa,
-            ca,
-            rot_a,
-            pa,
-            crown_a,
-            tri_verts,
-            3 * t,
-            3,
-            eye,
-            disp,
-            zero,
-            qx,
-            qy,
-            qz,
-            wx,
-            wy,
-            wz,
-            tol,
-            work,
+            va, a, crown_a, tri, _triangle(facet, t), NO_CROWN, (qx, qy, qz), (wx, wy, wz), tol, work
         )
         if value < crowned:
             crowned = value
@@ -143,7 +147,7 @@ def facet_geometry(
         return delta, best, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
     if t_count == 1:
         _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(
-            va, sa, ca, rot_a, pa, tri_verts, 3 * t_start, 3, eye, disp, ax, ay, az, bx, by, bz, delta, work
+            va, a, tri, _triangle(facet, t_start), (ax, ay, az), (bx, by, bz), delta, work
         )
         return delta, best, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face
     # Several triangles: combine the patches of those the rounded surface overlaps (within delta
@@ -151,13 +155,13 @@ def facet_geometry(
     ux, uy, uz, vx, vy, vz = plane_basis((ax - bx) / best, (ay - by) / best, (az - bz) / best)
     sums = np.zeros((3, 7))  # per kind of load: weight, c (3), weight * (c_u^2, c_u c_w, c_w^2) + s
     for t in range(t_start, t_start + t_count):
-        d, _, _, _, _, _, _ = gjk_distance(va, sa, ca, rot_a, pa, tri_verts, 3 * t, 3, eye, disp)
+        d, _, _, _, _, _, _ = gjk_distance(va, a, tri, _triangle(facet, t))
         if d > best + delta:
             continue
         # The facet's triangles are coplanar: every patch is taken along the facet's contact
         # normal (a triangle's own closest points may lie on its edge, with a tilted normal).
         area, length, px, py, pz, s_uu, s_uw, s_ww = contact_patch(
-            va, sa, ca, rot_a, pa, tri_verts, 3 * t, 3, eye, disp, ax, ay, az, bx, by, bz, delta, work
+            va, a, tri, _triangle(facet, t), (ax, ay, az), (bx, by, bz), delta, work
         )
         kind, weight = (0, area) if area > 0.0 else ((1, length) if length > 0.0 else (2, 1.0))
         cu = px * ux + py * uy + pz * uz

@@ -10,7 +10,7 @@ import pytest
 import trimesh
 from scipy.optimize import minimize
 
-from dem.convex import _REL_EPS, contact_patch, gjk_distance, scratch
+from dem.convex import _REL_EPS, contact_patch, gjk_distance, place, scratch
 from dem.polyhedra import Polyhedron, PolyhedronError, convex_pieces, make_polyhedron, shrink_convex
 from dem.quaternion import from_axis_angle, matrix
 
@@ -18,10 +18,12 @@ I3 = np.eye(3)
 CUBE = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
 
 
+def core(verts, pos, rot=I3):
+    return place(0, len(verts), np.asarray(rot, float), np.asarray(pos, float))
+
+
 def gjk(a, pos_a, b, pos_b, rot_a=I3, rot_b=I3):
-    return gjk_distance(
-        a, 0, len(a), rot_a, np.asarray(pos_a, float), b, 0, len(b), rot_b, np.asarray(pos_b, float)
-    )
+    return gjk_distance(a, core(a, pos_a, rot_a), b, core(b, pos_b, rot_b))
 
 
 def test_gjk_distance_of_parallel_faces_is_the_gap():
@@ -94,24 +96,7 @@ def test_gjk_reports_intersecting_hulls_as_distance_zero():
 def patch(a, pos_a, b, pos_b, rot_a=I3, rot_b=I3):
     d, ax, ay, az, bx, by, bz = gjk(a, pos_a, b, pos_b, rot_a, rot_b)
     return contact_patch(
-        a,
-        0,
-        len(a),
-        rot_a,
-        np.asarray(pos_a, float),
-        b,
-        0,
-        len(b),
-        rot_b,
-        np.asarray(pos_b, float),
-        ax,
-        ay,
-        az,
-        bx,
-        by,
-        bz,
-        1e-3,
-        scratch(),
+        a, core(a, pos_a, rot_a), b, core(b, pos_b, rot_b), (ax, ay, az), (bx, by, bz), 1e-3, scratch()
     )
 
 

@@ -9,16 +9,16 @@ import math
 import numpy as np
 import pytest
 
-from dem.convex import scratch
+from dem.convex import place, scratch
 from dem.facets import build_facets
 from dem.polyhedra import Polyhedron
 from dem.quaternion import from_axis_angle, matrix
-from dem.rounded_contact import facet_geometry, pair_geometry
+from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry
 from dem.walls import WallMesh
 
 EYE = np.eye(3)
 BOX = Polyhedron.box((0.04, 0.03, 0.01), 0.002, 1000.0)
-CROWN = np.asarray(BOX.crown(0))
+CROWN = tuple(float(c) for c in BOX.crown(0))
 KAPPA, KAPPA_H2, _ = CROWN
 
 
@@ -31,24 +31,9 @@ def floor():
 
 def on_floor(rot, pos):
     f = floor()
-    return facet_geometry(
-        BOX.core,
-        0,
-        8,
-        rot,
-        np.asarray(pos, float),
-        BOX.rounding,
-        CROWN,
-        f.tri.reshape(-1, 3),
-        0,
-        2,
-        np.zeros(3),
-        f.normal[0],
-        f.offset[0],
-        EYE,
-        np.zeros(3),
-        scratch(),
-    )
+    facet = WallFacet(0, 2, (0.0, 0.0, 0.0), tuple(float(c) for c in f.normal[0]), float(f.offset[0]))
+    core = place(0, 8, np.asarray(rot, float), np.asarray(pos, float))
+    return facet_geometry(BOX.core, core, BOX.rounding, CROWN, f.tri.reshape(-1, 3), facet, scratch())
 
 
 def test_a_box_lying_across_the_facet_diagonal_is_one_contact_below_its_centre():
@@ -112,24 +97,9 @@ def test_a_box_above_the_facet_plane_is_rejected_before_gjk():
 
 
 def pair(pos_a, rot_a, pos_b, rot_b, axis):
-    return pair_geometry(
-        BOX.core,
-        0,
-        8,
-        rot_a,
-        np.asarray(pos_a, float),
-        BOX.rounding,
-        CROWN,
-        BOX.core,
-        0,
-        8,
-        rot_b,
-        np.asarray(pos_b, float),
-        BOX.rounding,
-        CROWN,
-        axis,
-        scratch(),
-    )
+    a = place(0, 8, np.asarray(rot_a, float), np.asarray(pos_a, float))
+    b = place(0, 8, np.asarray(rot_b, float), np.asarray(pos_b, float))
+    return pair_geometry(BOX.core, a, BOX.rounding, CROWN, BOX.core, b, BOX.rounding, CROWN, axis, scratch())
 
 
 def test_stacked_boxes_touch_midway_between_the_feet_of_their_centres():

@@ -10,7 +10,7 @@ import trimesh
 
 from dem.clump import Clump
 from dem.contact import ContactParams
-from dem.convex import gjk_distance
+from dem.convex import gjk_distance, place
 from dem.polyhedra import Polyhedron
 from dem.quaternion import from_axis_angle, matrix
 from dem.simulation import Simulation
@@ -109,7 +109,8 @@ def test_a_rounded_polyhedron_is_written_as_its_surface_at_its_pose(tmp_path):
     local = np.ascontiguousarray((points - sim.bodies.pos[body]) @ matrix(pose))
     eye, origin = np.eye(3), np.zeros(3)
     distance = [
-        gjk_distance(local, k, 1, eye, origin, box.core, 0, 8, eye, origin)[0] for k in range(len(local))
+        gjk_distance(local, place(k, 1, eye, origin), box.core, place(0, 8, eye, origin))[0]
+        for k in range(len(local))
     ]
     assert np.allclose(distance, box.rounding, rtol=1e-6)
     # ... and it encloses the rounded box's volume (Steiner: core, slabs, quarter cylinders, ball),
