@@ -128,6 +128,16 @@ def save(path: Path | None, report: dict) -> None:
         path.write_text(json.dumps(report, indent=1, default=str))
 
 
+def medians_per_generation(generations: list[dict]) -> str:
+    """The median N_t of each batch's measured runs, the paper's Fig. 5 as one line:
+    ``g0 0 (10 ok), g1 1 (5 ok), ...`` (``-`` for a batch without a measured run)."""
+    parts = []
+    for entry in generations:
+        median = "-" if entry["n_remaining"] is None else f"{entry['n_remaining']['median']:g}"
+        parts.append(f"g{entry['generation']} {median} ({entry['simulations'] - entry['failed']} ok)")
+    return ", ".join(parts)
+
+
 def search_row(store, study_id: str, finished: bool) -> dict:
     records = store.trials(study_id)
     summary = build_summary(store.load_study(study_id), records)
@@ -270,6 +280,7 @@ def main() -> None:
                 f"{'' if row['finished'] else ' (search unfinished: time over)'}",
                 flush=True,
             )
+            print(f"  median N_t per generation: {medians_per_generation(row['generations'])}", flush=True)
             if active:  # time is over: the next run of the same command continues this study
                 executor.cancel(sorted(executor.in_flight()))
 
