@@ -327,6 +327,10 @@ def main() -> None:
             save(out, report)
             if active:
                 break  # the recommendation is not final: validated when the search ends
+        if args.truth_file and len(report["truth_fresh"]) < len(fresh_seeds):
+            # The truth pilot may have run the missing fresh seeds while the searches ran.
+            report["truth_fresh"] = truth_from_file(ROOT / args.truth_file, args.fresh)[3]
+            truth_w1 = own_w1(report)
         if len(report["truth_fresh"]) < len(fresh_seeds):
             # The truth's own W1, the yardstick of the table (the truth on the same fresh seeds).
             runs = simulate(executor, base.scenario, truth, fresh_seeds, "truth-fresh", args.timeout)
