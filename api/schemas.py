@@ -17,8 +17,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from dem.parameters import ALL_PARAMETER_NAMES, PARAMETER_NAMES
 from dem.scenarios.registry import ScenarioConfig
-from optimizer.protocols import PARAMETER_NAMES, StudyStatus, TrialState
+from optimizer.protocols import StudyStatus, TrialState
 
 
 class _Wire(BaseModel):
@@ -321,9 +322,9 @@ class SimulationCreate(BaseModel):
         description="A scenario configuration; its kind (default feeder) picks it from the registry.",
     )
     params: dict[str, float] = Field(
-        description="E (Pa), nu, e, mu.",
+        description="E (Pa), nu, e, mu; optionally E_wall (Pa), e_wall, mu_wall (the item-wall pair).",
         json_schema_extra={
-            "properties": {name: {"type": "number"} for name in PARAMETER_NAMES},
+            "properties": {name: {"type": "number"} for name in ALL_PARAMETER_NAMES},
             "required": list(PARAMETER_NAMES),
             "additionalProperties": False,
         },
@@ -335,14 +336,14 @@ class SimulationCreate(BaseModel):
     @field_validator("params")
     @classmethod
     def _four_parameters(cls, params: dict[str, float]) -> dict[str, float]:
-        from dem.parameters import range_problem
+        from dem.parameters import range_problem, unknown_names_problem
 
+        problem = unknown_names_problem(list(params))
+        if problem:
+            raise ValueError(problem)
         missing = [name for name in PARAMETER_NAMES if name not in params]
-        unknown = [name for name in params if name not in PARAMETER_NAMES]
-        if missing or unknown:
-            raise ValueError(
-                f"give exactly E, nu, e, mu (missing: {missing or 'none'}, unknown: {unknown or 'none'})"
-            )
+        if missing:
+            raise ValueError(f"give E, nu, e and mu (missing: {', '.join(missing)})")
         for name, value in params.items():
             problem = range_problem(name, value)
             if problem is not None:

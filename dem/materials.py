@@ -21,7 +21,9 @@ The pair rule (each fact of it lives here once):
   ``2 (1 - nu) / (2 - nu)`` (``dem.contact.tangential_stiffness_ratio``).
 
 ``MaterialTable`` numbers the distinct materials of a simulation and holds every pair's
-``(zeta, mu, K_t/K_n)`` as arrays for the kernels. This module computes no forces.
+``(zeta, mu, K_t/K_n)`` as arrays for the kernels. ``TrialMaterials`` turns a trial's parameters
+(the items' E, nu, e, mu and the optional E_wall, e_wall, mu_wall of ``dem/parameters.py``) into
+the items' material, the walls' and their explicit pair. This module computes no forces.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from dem.contact import ContactParams, ContactParamsError, damping_ratio, tangential_stiffness_ratio
+from dem.parameters import PARAMETER_NAMES, WALL_PARAMETER_NAMES
 
 # Columns of ``MaterialTable.law``.
 L_ZETA, L_MU, L_KT = 0, 1, 2
@@ -159,3 +162,35 @@ class MaterialTable:
         for i, a in enumerate(self.materials):
             for b in self.materials[i:]:
                 yield a, b, self.interaction(a, b)
+
+
+@dataclass(frozen=True)
+class TrialMaterials:
+    """The materials of a scenario's run from its parameters: the items', and the walls' with the
+    item-wall pair when a trial names E_wall, e_wall or mu_wall.
+
+    A wall of material ``walls`` has E = E_wall (default: the items' E; the stiffness is the two
+    E in series, ``dem.contact.wall_stiffness``) and the items' nu; the pair (items, walls) has
+    e = e_wall and mu = mu_wall (default: the items' e and mu). Without any of them ``walls`` is
+    None: the walls take the items' material, as every run did before these parameters existed,
+    and the run is the same to the last bit.
+    """
+
+    items: ContactParams
+    walls: Material | None = None
+    interactions: Mapping[tuple[str, str], Interaction] | None = None
+
+    ITEMS = "items"
+
+    @classmethod
+    def of(cls, params: Mapping[str, float], wall: str = "walls") -> TrialMaterials:
+        """From a run's merged parameters (``dem.scenarios.base.merged_params``); ``wall`` names
+        the walls' material."""
+        items = ContactParams(**{name: float(params[name]) for name in PARAMETER_NAMES})
+        given = {name: float(params[name]) for name in WALL_PARAMETER_NAMES if params.get(name) is not None}
+        if not given:
+            return cls(items)
+        items = Material.of(items, cls.ITEMS)
+        walls = Material(E=given.get("E_wall", items.E), nu=items.nu, e=items.e, mu=items.mu, name=wall)
+        pair = Interaction(e=given.get("e_wall", items.e), mu=given.get("mu_wall", items.mu))
+        return cls(items, walls, {(cls.ITEMS, wall): pair})

@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from dem.parameters import ALL_PARAMETER_NAMES, PARAMETER_NAMES
 from optimizer.generations import Run, per_generation, spread
 from optimizer.identifiability import study_identifiability
 from optimizer.objectives import Evaluation, evaluate, f1_rule
@@ -34,32 +36,33 @@ from optimizer.outcomes import (
 )
 from optimizer.pareto import rank, summary
 from optimizer.progress import study_progress
-from optimizer.protocols import PARAMETER_NAMES, StudyRecord, TrialRecord
+from optimizer.protocols import StudyRecord, TrialRecord
 from optimizer.space import ParameterSpace
 from optimizer.study import StudyDefinition
 
-CSV_COLUMNS = (
-    "trial_id",
-    "individual",
-    "generation",
-    "replicate",
-    "seed",
-    *PARAMETER_NAMES,
-    "state",
-    "status",
-    "n_remaining",
-    "n_items",
-    "wall_time_s",
-    "cost",
-    "steps",
-    "dt",
-    "f1",
-    "f2",
-    "failure",
-    "pareto",
-    "worker",
-    "message",
-)
+
+def response_column(response) -> str:
+    """A response's CSV header: its name and unit, 'angle_deg [deg]' (a count has no unit)."""
+    return response.name if response.unit == "1" else f"{response.name} [{response.unit}]"
+
+
+def study_parameter_names(definition: dict[str, Any]) -> list[str]:
+    """The parameters a stored study's trials carry, read from its definition as stored (no
+    validation, so a definition this version no longer accepts still shows): the items' four, and
+    the item-wall ones it names (``optimizer.study.Parameters.names``)."""
+    named = definition.get("parameters") or {}
+    return [name for name in ALL_PARAMETER_NAMES if name in PARAMETER_NAMES or named.get(name) is not None]
+
+
+def trial_csv_columns(parameters: Sequence[str], responses: Sequence[str]) -> list[str]:
+    """The one list of a trial's CSV columns, for calibrate's ``trials.csv`` and the API's
+    ``export.csv`` alike: the study's parameters (``Parameters.names()``) and one column per
+    response of its scenario (``response_column``) in their places."""
+    return [
+        "trial_id", "generation", "individual", "replicate", "seed", *parameters, "engine", "state",
+        "status", *responses, "wall_time_s", "cost", "dt", "f1", "f2", "failure", "pareto", "worker",
+        "attempts", "message",
+    ]  # fmt: skip
 
 
 def first_match(
@@ -196,34 +199,38 @@ def write_trials_csv(path: Path, definition: StudyDefinition, records: list[Tria
         for evaluation in rank(evaluations, definition.match_tolerance(), space).pareto
         for tid in evaluation.trial_ids
     }
+    declared = list(definition.declared_responses().values())
+    columns = trial_csv_columns(definition.parameters.names(), [response_column(r) for r in declared])
     with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=CSV_COLUMNS)
+        writer = csv.DictWriter(handle, fieldnames=columns)
         writer.writeheader()
         for record in sorted(records, key=lambda r: (r.spec.individual, r.spec.replicate)):
             spec, result = record.spec, record.result
             f1, f2 = objectives.get(spec.trial_id, (None, None))
+            # Only runs that measured: a failed run's responses are not measurements.
+            measured = result.responses if result is not None and result.status.value == "ok" else {}
             row = {
                 "trial_id": spec.trial_id,
-                "individual": spec.individual,
                 "generation": spec.generation,
+                "individual": spec.individual,
                 "replicate": spec.replicate,
                 "seed": spec.seed,
-                **{name: spec.params.get(name) for name in PARAMETER_NAMES},
+                **{name: spec.params.get(name) for name in definition.parameters.names()},
+                "engine": spec.engine,
                 "state": record.state.value,
+                **{response_column(r): measured.get(r.name) for r in declared},
                 "f1": f1,
                 "f2": f2,
                 "failure": failures.get(spec.individual, ""),
                 "pareto": spec.trial_id in pareto,
                 "worker": record.worker,
+                "attempts": record.attempts,
             }
             if result is not None:
                 row.update(
                     status=result.status.value,
-                    n_remaining=measured_n(result.status.value, result.n_remaining),
-                    n_items=result.n_items,
                     wall_time_s=result.wall_time_s,
                     cost=result.cost,
-                    steps=result.steps,
                     dt=result.dt,
                     message=result.message,
                 )

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from optimizer.protocols import PARAMETER_NAMES
 from optimizer.study import Parameters
 
 
@@ -49,6 +48,7 @@ class ParameterSpace:
             for spec in [getattr(parameters, name)]
         ]
         self.fixed = parameters.fixed_values()
+        self.all_names = parameters.names()
 
     @property
     def n_genes(self) -> int:
@@ -59,10 +59,11 @@ class ParameterSpace:
         return [axis.name for axis in self.axes]
 
     def params(self, genes: np.ndarray) -> dict[str, float]:
-        """All four parameters for one individual, in the canonical order."""
+        """Every parameter of the study (the items' four, and the item-wall ones it names) for
+        one individual, in the canonical order."""
         values = dict(self.fixed)
         values.update({axis.name: axis.value(gene) for axis, gene in zip(self.axes, genes, strict=True)})
-        return {name: values[name] for name in PARAMETER_NAMES}
+        return {name: values[name] for name in self.all_names}
 
     def genes(self, params: dict[str, float]) -> np.ndarray:
         return np.array([axis.gene(params[axis.name]) for axis in self.axes])

@@ -24,9 +24,24 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_serializer,
+    model_validator,
+)
 
-from dem.parameters import PARAMETER_NAMES, in_physical_range, physical_range_text
+from dem.parameters import (
+    ALL_PARAMETER_NAMES,
+    WALL_PARAMETER_NAMES,
+    in_physical_range,
+    item_parameter,
+    physical_range_text,
+    unknown_names_problem,
+)
 from dem.scenarios import registry
 
 
@@ -50,6 +65,7 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
     "e": (0.05, 0.95),
     "mu": (0.05, 1.0),
 }
+DEFAULT_BOUNDS.update({name: DEFAULT_BOUNDS[item_parameter(name)] for name in WALL_PARAMETER_NAMES})
 
 
 # Larger measurements are no physical count or angle; they only overflow the target's arithmetic.
@@ -72,16 +88,49 @@ class ParameterRange(_Strict):
 
 
 class Parameters(_Strict):
-    """The four contact parameters of the paper's eq. 1-2; an omitted one gets the default bounds."""
+    """The four contact parameters of the paper's eq. 1-2, the items' material (an omitted one
+    gets the default bounds), and the optional item-wall ones (``dem/parameters.py``): an omitted
+    one is not a parameter of the study at all, and the walls keep the items' value."""
 
     E: ParameterRange = Field(default_factory=ParameterRange, description="Young's modulus, Pa.")
     nu: ParameterRange = Field(default_factory=ParameterRange, description="Poisson's ratio.")
     e: ParameterRange = Field(default_factory=ParameterRange, description="Restitution coefficient.")
     mu: ParameterRange = Field(default_factory=ParameterRange, description="Friction coefficient.")
+    E_wall: ParameterRange | None = Field(
+        None, description="The walls' Young's modulus, Pa (the feeder's tray, the heap's floor); "
+        "omitted: the items' E.",
+    )
+    e_wall: ParameterRange | None = Field(
+        None, description="Restitution of an item against the walls; omitted: the items' e."
+    )
+    mu_wall: ParameterRange | None = Field(
+        None, description="Friction of an item against the walls; omitted: the items' mu."
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_names(cls, data: Any) -> Any:
+        """An unknown name is refused with the names that fit (not only the nearest one)."""
+        if isinstance(data, dict):
+            problem = unknown_names_problem(list(data))
+            if problem:
+                raise ValueError(problem)
+        return data
+
+    @model_serializer(mode="wrap")
+    def _without_omitted_wall(self, handler):
+        """An omitted item-wall parameter is not stored: a study written before they existed
+        stores and reads as it did."""
+        data = handler(self)
+        return {name: spec for name, spec in data.items() if spec is not None}
+
+    def names(self) -> list[str]:
+        """Every parameter the study's trials carry (searched or fixed), in the canonical order."""
+        return [name for name in ALL_PARAMETER_NAMES if getattr(self, name) is not None]
 
     @model_validator(mode="after")
     def _complete_and_physical(self) -> Parameters:
-        for name in PARAMETER_NAMES:
+        for name in self.names():
             spec: ParameterRange = getattr(self, name)
             if spec.fixed is not None:
                 if spec.low is not None or spec.high is not None:
@@ -95,7 +144,7 @@ class Parameters(_Strict):
             default_low, default_high = DEFAULT_BOUNDS[name]
             spec.low = default_low if spec.low is None else spec.low
             spec.high = default_high if spec.high is None else spec.high
-            spec.log = (name == "E") if spec.log is None else spec.log
+            spec.log = (item_parameter(name) == "E") if spec.log is None else spec.log
             for end in ("low", "high"):
                 value = getattr(spec, end)
                 if not in_physical_range(name, value):
@@ -110,16 +159,16 @@ class Parameters(_Strict):
                 )
             if spec.log and spec.low <= 0:
                 raise ValueError(f"parameters.{name}: a log-scale range needs low > 0")
-        if all(getattr(self, name).fixed is not None for name in PARAMETER_NAMES):
+        if all(getattr(self, name).fixed is not None for name in self.names()):
             raise ValueError("parameters: every parameter is fixed; leave at least one free to calibrate")
         return self
 
     def free(self) -> list[str]:
         """Names of the searched parameters, in the canonical order (the GA's gene order)."""
-        return [name for name in PARAMETER_NAMES if getattr(self, name).fixed is None]
+        return [name for name in self.names() if getattr(self, name).fixed is None]
 
     def fixed_values(self) -> dict[str, float]:
-        values = {name: getattr(self, name).fixed for name in PARAMETER_NAMES}
+        values = {name: getattr(self, name).fixed for name in self.names()}
         return {name: value for name, value in values.items() if value is not None}
 
 
@@ -306,7 +355,7 @@ class StudyDefinition(_Strict):
     @model_validator(mode="after")
     def _responses_and_engine(self) -> StudyDefinition:
         """Every experiment names a response the scenario measures; the engine can run it."""
-        from dem.engines.base import UnknownEngineError, refusal
+        from dem.engines.base import UnknownEngineError, parameters_refusal, refusal
 
         scenario = registry.get(self.scenario.kind)
         declared = {r.name: r for r in scenario.declared(self.scenario)}
@@ -322,6 +371,7 @@ class StudyDefinition(_Strict):
                 experiment.round = "half_up" if declared[name].integer else "none"
         try:
             problem = refusal(self.engine, scenario, self.scenario, self.engine_options)
+            problem = problem or parameters_refusal(self.engine, self.parameters.names())
         except UnknownEngineError as exc:
             raise ValueError(f"engine: {exc}") from None
         if problem:

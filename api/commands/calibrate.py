@@ -30,6 +30,8 @@ from pathlib import Path
 
 import typer
 
+from dem.parameters import item_parameter
+
 logger = logging.getLogger(__name__)
 
 EXIT_USER_ERROR = 2
@@ -242,7 +244,7 @@ class _LiveProgress:
 def _report(console, store, study_id: str, results: Path) -> None:
     from rich.table import Table
 
-    from optimizer.report import write_results
+    from optimizer.report import study_parameter_names, write_results
 
     study = store.load_study(study_id)
     records = store.trials(study_id)
@@ -252,13 +254,11 @@ def _report(console, store, study_id: str, results: Path) -> None:
     experiments = study.definition.get("experiments") or [study.definition.get("experiment") or {}]
     response = experiments[0].get("response") or "n_remaining"
     table = Table(title=f"Pareto front of {study_id} (f1 = {summary['f1_rule']})")
+    names = study_parameter_names(study.definition)
     for column in (
         "individual",
         "gen",
-        "E [Pa]",
-        "nu",
-        "e",
-        "mu",
+        *(_parameter_header(name) for name in names),
         "runs",
         response,
         "f1 [90 %]",
@@ -271,10 +271,7 @@ def _report(console, store, study_id: str, results: Path) -> None:
         table.add_row(
             f"{member['individual']}{' *' if member['individual'] == chosen else ''}",
             str(member["generation"]),
-            f"{params['E']:.3g}",
-            f"{params['nu']:.3f}",
-            f"{params['e']:.3f}",
-            f"{params['mu']:.3f}",
+            *(_parameter_cell(name, params) for name in names),
             str(len(member["trial_ids"])),
             _n_t(member),
             _f1(member),
@@ -380,6 +377,18 @@ def _optional(value: float | None) -> str:
     return "-" if value is None else f"{value:g}"
 
 
+def _parameter_header(name: str) -> str:
+    """A parameter's column: a modulus with its unit ('E [Pa]', 'E_wall [Pa]')."""
+    return f"{name} [Pa]" if item_parameter(name) == "E" else name
+
+
+def _parameter_cell(name: str, params: dict) -> str:
+    value = params.get(name)
+    if value is None:
+        return "-"
+    return f"{value:.3g}" if item_parameter(name) == "E" else f"{value:.3f}"
+
+
 def _validation_table(console, summary: dict) -> None:
     """The end of every study: each candidate's fresh-seed N_t against the experiment."""
     from rich.table import Table
@@ -393,8 +402,9 @@ def _validation_table(console, summary: dict) -> None:
     table = Table(
         title=f"Validation on fresh seeds (experiment: median {_median(measured):g}, {response} {measured})"
     )
-    for column in ("individual", "E [Pa]", "e", "mu", "search f1", f"fresh {response}", "median [90 %]",
-                   "W1", "f1 [90 %]", "verdict"):  # fmt: skip
+    names = [name for name in rows[0]["params"] if name != "nu"]  # nu hardly matters: kept narrow
+    for column in ("individual", *(_parameter_header(name) for name in names), "search f1",
+                   f"fresh {response}", "median [90 %]", "W1", "f1 [90 %]", "verdict"):  # fmt: skip
         table.add_column(column, justify="right")
     for row in rows:
         params = row["params"]
@@ -405,7 +415,7 @@ def _validation_table(console, summary: dict) -> None:
         )
         colour = "green" if row["verdict"] == "validated" else "red"
         table.add_row(
-            str(row["individual"]), f"{params['E']:.3g}", f"{params['e']:.3f}", f"{params['mu']:.3f}",
+            str(row["individual"]), *(_parameter_cell(name, params) for name in names),
             f"{row['search_f1']:.2f}", fresh, median, "-" if row["w1"] is None else f"{row['w1']:.2f}",
             f1, f"[{colour}]{row['verdict']}[/]",
         )  # fmt: skip

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import typer
 
-from dem.parameters import PARAMETER_NAMES, range_problem
+from dem.parameters import ALL_PARAMETER_NAMES, range_problem
 
 
 class SetError(ValueError):
@@ -31,7 +31,8 @@ def _parse_value(text: str):
 
 
 def split_sets(sets: list[str]) -> tuple[dict[str, float], dict[str, object]]:
-    """``--set`` options as contact parameters (E, nu, e, mu) and dotted config overrides."""
+    """``--set`` options as contact parameters (E, nu, e, mu, E_wall, e_wall, mu_wall) and dotted
+    config overrides."""
     params: dict[str, float] = {}
     overrides: dict[str, object] = {}
     for item in sets:
@@ -39,7 +40,7 @@ def split_sets(sets: list[str]) -> tuple[dict[str, float], dict[str, object]]:
         key, text = key.strip(), text.strip()
         if not sep or not key or not text:
             raise SetError(f"--set {item!r}: expected KEY=VALUE, e.g. --set E=5e6")
-        if key in PARAMETER_NAMES:
+        if key in ALL_PARAMETER_NAMES:
             try:
                 value = float(text)
             except ValueError:
@@ -52,7 +53,7 @@ def split_sets(sets: list[str]) -> tuple[dict[str, float], dict[str, object]]:
             overrides[key] = _parse_value(text)
         else:
             raise SetError(
-                f"--set {key}: unknown key; use one of {', '.join(PARAMETER_NAMES)} or a dotted config "
+                f"--set {key}: unknown key; use one of {', '.join(ALL_PARAMETER_NAMES)} or a dotted config "
                 "key such as vibration.amplitude"
             )
     return params, overrides

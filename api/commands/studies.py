@@ -82,10 +82,10 @@ def register(app: typer.Typer) -> None:
         from api.services import trials
 
         try:
-            rows = trials.export_rows(_store(), study_id, _operator())
+            columns, rows = trials.export_rows(_store(), study_id, _operator())
         except NotFoundError as exc:
             _fail(exc.detail.split(";")[0])
-        text = "".join(trials.export_csv(rows))
+        text = "".join(trials.export_csv(columns, rows))
         if output is None:
             typer.echo(text, nl=False)
         else:

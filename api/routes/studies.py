@@ -124,9 +124,9 @@ def recommendation(
     responses={200: {"content": {"text/csv": {}}, "description": "One row per trial."}},
 )
 def export_csv(study_id: str, principal: ApiKeyDep, store: StoreDep):
-    rows = trials.export_rows(store, study_id, principal)
+    columns, rows = trials.export_rows(store, study_id, principal)
     return StreamingResponse(
-        trials.export_csv(rows), media_type="text/csv",
+        trials.export_csv(columns, rows), media_type="text/csv",
         headers={"Content-Disposition": f'attachment; filename="{study_id}-trials.csv"'},
     )
 
@@ -136,5 +136,5 @@ def export_json(study_id: str, principal: ApiKeyDep, store: StoreDep) -> dict:
     """The study (definition, status, recommendation) and every trial, in one document."""
     return {
         "study": studies.get_study(store, study_id, principal).model_dump(mode="json"),
-        "trials": trials.export_rows(store, study_id, principal),
+        "trials": trials.export_rows(store, study_id, principal)[1],
     }

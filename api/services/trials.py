@@ -39,18 +39,9 @@ from api.services.views import StudyViewCache
 from api.store import Page, SqlStore, TrialFilter
 from optimizer.generations import Run, per_generation
 from optimizer.outcomes import individual_failures, is_failed, measured_n
-from optimizer.protocols import PARAMETER_NAMES, StudyStatus, TrialState
+from optimizer.protocols import StudyStatus, TrialState
+from optimizer.report import response_column, study_parameter_names, trial_csv_columns
 from optimizer.study import StudyDefinition
-
-CSV_COLUMNS = (
-    "trial_id", "generation", "individual", "replicate", "seed", *PARAMETER_NAMES, "engine", "state",
-    "status", "wall_time_s", "cost", "f1", "f2", "failure", "pareto", "worker", "attempts", "message",
-)  # plus one column per response the study's scenario declares, after "status"
-
-
-def response_column(response) -> str:
-    """A response's CSV header: its name and unit, 'angle_deg [deg]' (a count has no unit)."""
-    return response.name if response.unit == "1" else f"{response.name} [{response.unit}]"
 
 
 def _objectives(row) -> tuple[float | None, float | None]:
@@ -210,41 +201,42 @@ def recommendation(store: SqlStore, study_id: str, principal: Principal) -> Reco
     )
 
 
-def export_rows(store: SqlStore, study_id: str, principal: Principal) -> list[dict]:
-    """Every trial as a flat row (CSV and JSON export): parameters, one column per declared
-    response (headed with its unit), time, cost and objectives."""
+def export_rows(store: SqlStore, study_id: str, principal: Principal) -> tuple[list[str], list[dict]]:
+    """The export's columns (``optimizer.report.trial_csv_columns``) and every trial as a flat
+    row (CSV and JSON export): parameters, one column per declared response (headed with its
+    unit), time, cost and objectives."""
     from api.services.studies import declared_responses
 
     study = store.get_study(study_id, principal.visible_to)
     declared = declared_responses(study.definition)
+    names = study_parameter_names(study.definition)
+    columns = trial_csv_columns(names, [response_column(r) for r in declared])
     rows = []
     trial_rows = store.trial_rows_for_export(study_id)
     failures = individual_failures((row.individual, row.replicate, row.status) for row in trial_rows)
     for row in trial_rows:
         f1, f2 = _objectives(row)
         measured = row.responses or {}
-        rows.append(
-            {
-                "trial_id": row.id, "generation": row.generation, "individual": row.individual,
-                "replicate": row.replicate, "seed": row.seed,
-                **{name: row.params.get(name) for name in PARAMETER_NAMES},
-                "engine": row.engine, "state": row.state, "status": row.status,
-                # Only runs that measured: a failed run's responses are not measurements.
-                **{response_column(r): measured.get(r.name) if row.status == "ok" else None
-                   for r in declared},
-                "wall_time_s": row.wall_time_s, "cost": row.cost, "f1": f1, "f2": f2,
-                "failure": failures.get(row.individual, ""),
-                "pareto": row.pareto, "worker": row.worker, "attempts": row.attempts,
-                "message": row.message,
-            }
-        )
-    return rows
+        values = {
+            "trial_id": row.id, "generation": row.generation, "individual": row.individual,
+            "replicate": row.replicate, "seed": row.seed,
+            **{name: row.params.get(name) for name in names},
+            "engine": row.engine, "state": row.state, "status": row.status,
+            # Only runs that measured: a failed run's responses are not measurements.
+            **{response_column(r): measured.get(r.name) if row.status == "ok" else None
+               for r in declared},
+            "wall_time_s": row.wall_time_s, "cost": row.cost, "dt": row.dt, "f1": f1, "f2": f2,
+            "failure": failures.get(row.individual, ""),
+            "pareto": row.pareto, "worker": row.worker, "attempts": row.attempts,
+            "message": row.message,
+        }
+        rows.append({column: values[column] for column in columns})
+    return columns, rows
 
 
-def export_csv(rows: list[dict]) -> Iterator[str]:
+def export_csv(columns: list[str], rows: list[dict]) -> Iterator[str]:
     """CSV text in chunks, so a large study streams instead of building one big string."""
     buffer = io.StringIO()
-    columns = list(rows[0]) if rows else list(CSV_COLUMNS)
     writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n")
     writer.writeheader()
     for index, row in enumerate(rows, start=1):

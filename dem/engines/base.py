@@ -1,12 +1,13 @@
 """The engine protocol and the engine registry: how a scenario run reaches an engine.
 
-An engine has a ``name`` (what a study's ``engine = "..."`` says), tells whether it can run on
-this machine (``unavailable()``: '' or why not, e.g. the ``liggghts`` binary is missing) and
-whether it can run a given scenario config (``refuses(scenario, config)``: '' or why not), and
-runs one simulation: ``run(scenario, config, params, seed, control, options)`` returns a
-``dem.result.SimulationResult`` with the scenario's declared ``responses``, the wall time and its
-``engine`` name, and never raises. ``options`` are the study's engine options (the command
-engine's template and command; LIGGGHTS' binary path).
+An engine has a ``name`` (what a study's ``engine = "..."`` says), the contact parameters it
+can apply (``parameters``: the items' four and, where it has them, the item-wall ones), tells
+whether it can run on this machine (``unavailable()``: '' or why not, e.g. the ``liggghts``
+binary is missing) and whether it can run a given scenario config (``refuses(scenario,
+config)``: '' or why not), and runs one simulation: ``run(scenario, config, params, seed,
+control, options)`` returns a ``dem.result.SimulationResult`` with the scenario's declared
+``responses``, the wall time and its ``engine`` name, and never raises. ``options`` are the
+study's engine options (the command engine's template and command; LIGGGHTS' binary path).
 
 How to add an engine:
 
@@ -38,6 +39,7 @@ DEFAULT_ENGINE = "numba"
 
 class Engine(Protocol):
     name: str
+    parameters: tuple[str, ...]  # the contact parameters it can apply (``dem/parameters.py``)
 
     def unavailable(self, options: dict[str, Any] | None = None) -> str: ...
 
@@ -88,6 +90,18 @@ def refusal(engine_name: str, scenario: Scenario, config, options: dict[str, Any
             f"{', '.join(scenario.engines)}"
         )
     return engine.refuses(scenario, scenario.config(config), options)
+
+
+def parameters_refusal(engine_name: str, names) -> str:
+    """'' when the engine applies every one of these parameters, else which it cannot."""
+    engine = get_engine(engine_name)
+    missing = [name for name in names if name not in engine.parameters]
+    if not missing:
+        return ""
+    return (
+        f"engine {engine_name!r} cannot apply {', '.join(missing)}; it takes "
+        f"{', '.join(engine.parameters)} (the built-in engine 'numba' takes them all)"
+    )
 
 
 def run_scenario(

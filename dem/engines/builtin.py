@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from dem.parameters import ALL_PARAMETER_NAMES
 from dem.scenarios.base import RunControl, Scenario
 
 
 class BuiltinEngine:
     name = "numba"
+    parameters = ALL_PARAMETER_NAMES
 
     def unavailable(self, options=None) -> str:
         return ""

@@ -13,7 +13,8 @@ A study selects it with ``engine = "command"`` and ``[engine_options]``::
     # patterns = { angle_deg = "angle of repose: ([-0-9.eE+]+)" }
 
 The template and every command argument are rendered with Python's ``string.Template``:
-``$E $nu $e $mu`` (the trial's parameters), ``$seed``, ``$input`` (the input file's name),
+``$E $nu $e $mu`` (the trial's parameters; ``$E_wall $e_wall $mu_wall`` too when the study or the
+scenario's ``[params]`` names them), ``$seed``, ``$input`` (the input file's name),
 ``$config_json`` (the scenario's whole config as JSON) and every config value by its dotted key
 with underscores (``$particles_count``, ``$cylinder_lift_speed``). The program runs in a fresh
 temporary folder with the deadline and stop requests of any run; a non-zero exit, a missing
@@ -33,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from dem.engines.process import SCREEN, run_process
+from dem.parameters import ALL_PARAMETER_NAMES
 from dem.result import SimulationResult, SimulationStatus
 from dem.scenarios.base import RunControl, Scenario, merged_params
 
@@ -52,6 +54,7 @@ def flatten(data: Any, prefix: str = "") -> dict[str, str]:
 
 class CommandEngine:
     name = "command"
+    parameters = ALL_PARAMETER_NAMES  # the template places them
 
     def unavailable(self, options=None) -> str:
         return ""  # the program is the study's; a missing one fails its runs with a message

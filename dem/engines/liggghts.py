@@ -19,6 +19,10 @@ forces (``dem/contact.py`` is the reference):
 * ``coefficientFriction`` = mu for every pair; Coulomb's cap acts on the tangential spring as in
   ours (``tangential history``); no rolling friction in either engine.
 
+The walls are of the items' material: a study or run naming E_wall, e_wall or mu_wall is refused
+(``parameters``), since plate and cylinder share one atom type here while the built-in engine
+gives the floor alone the item-wall material.
+
 Scenarios reach LIGGGHTS through an adapter (``ADAPTERS``, keyed by scenario kind) that writes
 the case's files and reads its responses back. To add one: a class with ``refuses(config)``,
 ``write(folder, config, params, seed) -> LiggghtsCase`` and ``read(folder, config, case) ->
@@ -40,7 +44,9 @@ from typing import Any
 import numpy as np
 
 from dem.contact import damping_ratio, normal_stiffness, tangential_stiffness_ratio, wall_stiffness
+from dem.engines.base import parameters_refusal
 from dem.engines.process import run_process
+from dem.parameters import PARAMETER_NAMES
 from dem.result import SimulationResult, SimulationStatus
 from dem.scenarios.base import RunControl, Scenario, merged_params
 
@@ -157,6 +163,8 @@ def loop_steps(log: str) -> int:
 
 class LiggghtsEngine:
     name = "liggghts"
+    # Its walls are one atom type of the items' material: no item-wall parameters yet.
+    parameters = PARAMETER_NAMES
 
     def unavailable(self, options=None) -> str:
         if binary(options) is None:
@@ -175,6 +183,7 @@ class LiggghtsEngine:
         started = time.monotonic()
         checked, problem = merged_params(config.params, params)
         base = {"seed": seed, "params": checked, "engine": self.name}
+        problem = problem or parameters_refusal(self.name, checked)
         if problem:
             return SimulationResult(status=SimulationStatus.ERROR, message=problem, **base)
         adapter = ADAPTERS[scenario.kind]()

@@ -49,9 +49,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_serializer
 
-from dem.parameters import PARAMETER_NAMES, range_problem
+from dem.parameters import ALL_PARAMETER_NAMES, range_problem, unknown_names_problem
 from dem.result import SimulationResult
 
 
@@ -64,20 +64,30 @@ class Section(BaseModel):
 
 class ParamsConfig(Section):
     """Contact parameters used when the caller does not give them (the paper's Table 2 area);
-    their ranges are ``dem/parameters.py``'s."""
+    their ranges are ``dem/parameters.py``'s. The item-wall ones are optional: unset, the walls
+    are of the items' material (and a dump leaves them out, so a config written before they
+    existed reads and writes as it did)."""
 
     E: float = Field(1e7, description="Young's modulus, Pa.")
     nu: float = Field(0.3, description="Poisson's ratio.")
     e: float = Field(0.5, description="Restitution coefficient.")
     mu: float = Field(0.5, description="Friction coefficient.")
+    E_wall: float | None = Field(None, description="The walls' Young's modulus, Pa; default E.")
+    e_wall: float | None = Field(None, description="Item-wall restitution; default e.")
+    mu_wall: float | None = Field(None, description="Item-wall friction; default mu.")
 
-    @field_validator(*PARAMETER_NAMES)
+    @field_validator(*ALL_PARAMETER_NAMES)
     @classmethod
-    def _physical(cls, value: float, info: ValidationInfo) -> float:
-        problem = range_problem(info.field_name, value)
+    def _physical(cls, value: float | None, info: ValidationInfo) -> float | None:
+        problem = None if value is None else range_problem(info.field_name, value)
         if problem is not None:
             raise ValueError(problem)
         return value
+
+    @model_serializer(mode="wrap")
+    def _without_unset_wall(self, handler):
+        data = handler(self)
+        return {key: value for key, value in data.items() if value is not None}
 
 
 @dataclass(frozen=True)
@@ -189,13 +199,12 @@ class Scenario:
 
 
 def merged_params(config_params: ParamsConfig, params: dict[str, float]) -> tuple[dict[str, float], str]:
-    """The run's contact parameters (the caller's over the config's) and an error, '' when usable."""
+    """The run's contact parameters (the caller's over the config's) and an error, '' when usable.
+    Item-wall parameters appear only when the caller or the config gives them."""
     merged = {**config_params.model_dump(), **params}
-    unknown = sorted(set(params) - set(PARAMETER_NAMES))
-    if unknown:
-        return _floats(merged), (
-            f"unknown parameter(s) {', '.join(unknown)}; scenarios take {', '.join(PARAMETER_NAMES)}"
-        )
+    problem = unknown_names_problem(sorted(params))
+    if problem:
+        return _floats(merged), problem
     try:
         return ParamsConfig.model_validate(merged).model_dump(), ""
     except Exception as exc:  # pydantic ValidationError, or a value that is not a number

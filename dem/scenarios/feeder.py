@@ -70,7 +70,8 @@ def run_feeder(
 ) -> SimulationResult:
     """Run one feeder experiment with these contact parameters; never raises.
 
-    ``params`` holds any of E, nu, e, mu (missing ones come from ``config.params``); ``deadline``
+    ``params`` holds any of E, nu, e, mu and the optional E_wall, e_wall, mu_wall, the tray's
+    material and its pair with the items (missing ones come from ``config.params``); ``deadline``
     is a ``time.monotonic()`` value; ``should_stop()`` is polled between chunks; ``progress`` is
     called with (simulated time, items not yet discharged); ``snapshot_dir`` receives the files
     ``demcal render`` reads (see ``dem/scenarios/render.py``); ``vtk_dir`` receives ParaView files
@@ -120,7 +121,7 @@ class _FeederRun:
         snapshot_dir: Path | None,
         vtk_dir: Path | None = None,
     ):
-        from dem.contact import ContactParams
+        from dem.materials import TrialMaterials
         from dem.motion import SinusoidalTranslation
         from dem.simulation import Simulation
         from dem.walls import WallMesh
@@ -142,8 +143,10 @@ class _FeederRun:
 
         lo = self.tray.vertices.min(axis=0)
         hi = self.tray.vertices.max(axis=0)
+        materials = TrialMaterials.of(params, wall="tray")
         self.sim = Simulation(
-            ContactParams(E=params["E"], nu=params["nu"], e=params["e"], mu=params["mu"]),
+            materials.items,
+            interactions=materials.interactions,
             gravity=(0.0, 0.0, -GRAVITY),
             domain_min=tuple(lo - np.array([0.3, 0.3, 0.5])),
             domain_max=tuple(hi + np.array([0.5, 0.3, self.INSERT_ZONE_HEIGHT + 0.5])),
@@ -159,7 +162,8 @@ class _FeederRun:
             start_time=config.stages.vibration_start,
             ramp_time=vib.ramp_time,
         )
-        self.sim.add_wall(WallMesh(self.tray.vertices, self.tray.faces, motion=motion, name="tray"))
+        tray, walls = self.tray, materials.walls
+        self.sim.add_wall(WallMesh(tray.vertices, tray.faces, material=walls, motion=motion, name="tray"))
 
         self.writer = None
         if snapshot_dir is not None:

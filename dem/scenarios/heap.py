@@ -16,8 +16,10 @@ Protocol (every number is a config key, see ``examples/repose.toml``):
 
 Particles are either spheres (``particles.shape = "spheres"``: ``count`` spheres of
 ``diameter`` in ``size_classes`` sizes spread by ``size_spread``, density ``density``) or the
-feeder's items (``"items"``: ``particles.items`` as in the feeder's ``[items]``). Plate and
-cylinder share the particles' material, as the feeder's tray does.
+feeder's items (``"items"``: ``particles.items`` as in the feeder's ``[items]``). The plate is
+the floor: of the particles' material, or, when a trial names E_wall, e_wall or mu_wall, of the
+item-wall material (``dem.materials.TrialMaterials``), as the feeder's tray is. The cylinder
+keeps the particles' material: it only holds the column and is lifted away.
 
 Responses: ``angle_deg`` (the angle of repose, degrees) and ``height`` (the heap's height, m).
 Engines: the built-in one (spheres and items) and LIGGGHTS (spheres; ``dem/engines/liggghts.py``
@@ -171,7 +173,7 @@ def run_heap(
 class _HeapRun:
     def __init__(self, config: HeapConfig, params: dict[str, float], seed: int, control: RunControl):
         from dem.clump import Clump
-        from dem.contact import ContactParams
+        from dem.materials import TrialMaterials
         from dem.motion import LinearLift
         from dem.simulation import Simulation
         from dem.walls import WallMesh
@@ -197,8 +199,10 @@ class _HeapRun:
         self.geometry = heap_geometry(config, column)
         g = self.geometry
         half = 0.5 * config.plate.size
+        materials = TrialMaterials.of(params, wall="floor")
         self.sim = Simulation(
-            ContactParams(**params),
+            materials.items,
+            interactions=materials.interactions,
             gravity=(0.0, 0.0, -GRAVITY),
             domain_min=(-half - 0.1, -half - 0.1, -0.05 - config.plate.roughness * config.particles.diameter),
             domain_max=(half + 0.1, half + 0.1, config.cylinder.height + g.lift_distance + 0.1),
@@ -206,7 +210,7 @@ class _HeapRun:
             dt_fraction=config.run.dt_fraction,
             seed=seed,
         )
-        self.sim.add_wall(WallMesh(g.plate_vertices, g.plate_faces, name="plate"))
+        self.sim.add_wall(WallMesh(g.plate_vertices, g.plate_faces, material=materials.walls, name="plate"))
         lift = LinearLift(
             (0.0, 0.0, 1.0), g.lift_distance, config.cylinder.lift_speed, config.stages.lift_start
         )
@@ -336,11 +340,8 @@ def time_step(config: HeapConfig, params: dict[str, float]) -> float:
     from dem.contact import ContactParams
     from dem.timestep import automatic_time_step
 
-    merged = {
-        **config.params.model_dump(),
-        **{k: v for k, v in params.items() if k in PARAMETER_NAMES},
-    }
-    contact = ContactParams(**{k: float(v) for k, v in merged.items()})
+    merged = {**config.params.model_dump(), **params}
+    contact = ContactParams(**{k: float(merged[k]) for k in PARAMETER_NAMES})
     if config.particles.shape == "spheres":
         clumps = [Clump.solid_sphere(0.5 * d, config.particles.density) for d in config.particles.diameters()]
     else:

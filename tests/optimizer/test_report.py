@@ -92,7 +92,7 @@ def test_failed_runs_are_counted_by_status_and_never_shown_as_n_t(tmp_path, smal
     assert sum(g["failed"] for g in summary["generations"]) == len(failed)
     for tid, status in failed.items():
         assert rows[tid]["status"] == status
-        assert rows[tid]["n_remaining"] == "" and rows[tid]["f1"] == "" and rows[tid]["f2"] == ""
+        assert rows[tid]["n_remaining [items]"] == "" and rows[tid]["f1"] == "" and rows[tid]["f2"] == ""
         assert rows[tid]["failure"] == status
     for entry in summary["generations"]:  # Fig. 5's numbers come from the ok runs alone
         generation = [r for r in records if r.spec.generation == entry["generation"]]
