@@ -98,15 +98,14 @@ def support(verts, core, dx, dy, dz):
 
 @numba.njit(**JIT_FLAGS)
 def _keep(simplex, lam, idx0, idx1, idx2, k):
-    """Reduce the simplex (rows: w, a, b stacked in columns 0:3, 3:6, 6:9) to rows idx*."""
-    tmp = np.empty((3, 9))
+    """Reduce the simplex (rows: w, a, b stacked in columns 0:3, 3:6, 6:9) to rows idx*, which
+    increase (row r comes from a row >= r): copied in place, in order, without a heap array."""
     sel = (idx0, idx1, idx2)
     for r in range(k):
-        for c in range(9):
-            tmp[r, c] = simplex[sel[r], c]
-    for r in range(k):
-        for c in range(9):
-            simplex[r, c] = tmp[r, c]
+        src = sel[r]
+        if src != r:
+            for c in range(9):
+                simplex[r, c] = simplex[src, c]
     return k
 
 

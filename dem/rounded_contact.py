@@ -15,16 +15,19 @@ Cheap rejections come first, so GJK runs only for pieces that nearly touch:
 * piece pairs: a cached separating direction per pair (the last normal): if the cores are
   further apart than ``r_a + r_b`` along it, the pair is apart without GJK (Bullet's
   separating-axis caching);
-* facets: the core's extent along the facet normal (two support queries) against the plane.
+* facets: the core's extent along the facet normal (two support queries) against the plane,
+  then per triangle the distance of the ball about the body's centre that holds the core.
 
 A facet of several coplanar triangles is one contact: D is the smallest over its triangles, and
 the patch combines the triangles near that distance weighted by their patch areas (or lengths).
 A core is a vertex array and a ``dem.convex.Core``, a crown a 3-tuple, a facet the wall's
-triangle array and a ``WallFacet``. Pure numba; no allocation.
+triangle array and a ``WallFacet``. Pure numba; the only allocations are a facet contact's
+per-triangle table (each triangle's GJK once for its three passes) and its patch sums.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numba
@@ -33,6 +36,7 @@ import numpy as np
 from dem.conf import JIT_FLAGS
 from dem.convex import Core, contact_patch, gjk_distance, plane_basis, support
 from dem.crown import crowned_contact
+from dem.facets import closest_point_on_triangle
 
 IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # walls translate, never turn
 NO_CROWN = (0.0, 0.0, 0.0)  # a facet's
@@ -77,9 +81,10 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, work):
     """
     reach = ra + rb
     if axis[0] != 0.0 or axis[1] != 0.0 or axis[2] != 0.0:
-        lo_a, _ = _extent(va, a, axis[0], axis[1], axis[2])
-        _, hi_b = _extent(vb, b, axis[0], axis[1], axis[2])
-        gap = lo_a - hi_b
+        # A's lowest and B's highest point along the axis: one support query each.
+        lx, ly, lz = support(va, a, -axis[0], -axis[1], -axis[2])
+        hx, hy, hz = support(vb, b, axis[0], axis[1], axis[2])
+        gap = (lx * axis[0] + ly * axis[1] + lz * axis[2]) - (hx * axis[0] + hy * axis[1] + hz * axis[2])
         if gap > reach:
             return reach - gap, gap, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     d, ax, ay, az, bx, by, bz = gjk_distance(va, a, vb, b)
@@ -107,7 +112,8 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     crown ``crown_a``) with a ``WallFacet`` of the triangle array ``tri``: ``(delta, d, nx, ny,
     nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face)``, delta the crowned overlap (the least crowned
     distance over the triangles, ``dem.crown``) and c its contact point. ``is_face``: the closest
-    point of the facet is inside it (not on its boundary).
+    point of the facet is inside it (not on its boundary). When apart (delta <= 0), d may be a
+    lower bound of the distance rather than the distance.
     """
     disp, normal, offset = facet.disp, facet.normal, facet.offset
     t_start, t_count = facet.start, facet.count
@@ -115,12 +121,34 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     lo, hi = _extent(va, a, normal[0], normal[1], normal[2])
     if lo - (offset + shift) > ra or (offset + shift) - hi > ra:
         return -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    # Each triangle's distance and closest points, computed once for the three passes below. A
+    # triangle farther than ra + tol from the ball about the body's centre that holds the core
+    # cannot hold the contact (its crowned distance is at least its distance): no GJK for it.
+    tol = 4.0 * crown_a[2]
+    core_reach2 = 0.0
+    for v in range(a.start, a.start + a.count):
+        core_reach2 = max(core_reach2, va[v, 0] ** 2 + va[v, 1] ** 2 + va[v, 2] ** 2)
+    core_reach = math.sqrt(core_reach2)
+    px, py, pz = a.pos[0] - disp[0], a.pos[1] - disp[1], a.pos[2] - disp[2]
+    gjk = np.empty((t_count, 7))
     best = np.inf
+    bound = np.inf  # the least distance of a triangle passed over (a lower bound)
     ax = ay = az = bx = by = bz = 0.0
-    for t in range(t_start, t_start + t_count):
+    for k in range(t_count):
+        t = t_start + k
+        qx, qy, qz = closest_point_on_triangle(px, py, pz, tri[3 * t : 3 * t + 3])
+        apart = math.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2) - core_reach
+        if apart > ra + tol:
+            gjk[k, 0] = np.inf
+            bound = min(bound, apart)
+            continue
         d, qx, qy, qz, wx, wy, wz = gjk_distance(va, a, tri, _triangle(facet, t))
+        gjk[k, 0], gjk[k, 1], gjk[k, 2], gjk[k, 3] = d, qx, qy, qz
+        gjk[k, 4], gjk[k, 5], gjk[k, 6] = wx, wy, wz
         if d < best:
             best, ax, ay, az, bx, by, bz = d, qx, qy, qz, wx, wy, wz
+    if best > bound:  # apart (the distance is at least the bound)
+        return ra - bound, bound, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
     delta = ra - best
     if delta <= 0.0 or best == 0.0:
         return delta, best, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
@@ -128,15 +156,23 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     is_face = plane * plane >= best * best * (1.0 - 1e-10)
     # The crowned distance of the facet is the least over its triangles (each with its own
     # closest points; coplanar triangles agree where they meet).
-    tol = 4.0 * crown_a[2]
     crowned = np.inf
     nx = ny = nz = cx = cy = cz = 0.0
-    for t in range(t_start, t_start + t_count):
-        d, qx, qy, qz, wx, wy, wz = gjk_distance(va, a, tri, _triangle(facet, t))
+    for k in range(t_count):
+        d = gjk[k, 0]
         if d > best + tol or d == 0.0:
             continue
         value, xx, xy, xz, yx, yy, yz, ex, ey, ez = crowned_contact(
-            va, a, crown_a, tri, _triangle(facet, t), NO_CROWN, (qx, qy, qz), (wx, wy, wz), tol, work
+            va,
+            a,
+            crown_a,
+            tri,
+            _triangle(facet, t_start + k),
+            NO_CROWN,
+            (gjk[k, 1], gjk[k, 2], gjk[k, 3]),
+            (gjk[k, 4], gjk[k, 5], gjk[k, 6]),
+            tol,
+            work,
         )
         if value < crowned:
             crowned = value
@@ -154,10 +190,10 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     # of the closest), by their loads: area loads if any, else line loads, else equally.
     ux, uy, uz, vx, vy, vz = plane_basis((ax - bx) / best, (ay - by) / best, (az - bz) / best)
     sums = np.zeros((3, 7))  # per kind of load: weight, c (3), weight * (c_u^2, c_u c_w, c_w^2) + s
-    for t in range(t_start, t_start + t_count):
-        d, _, _, _, _, _, _ = gjk_distance(va, a, tri, _triangle(facet, t))
-        if d > best + delta:
+    for k in range(t_count):
+        if gjk[k, 0] > best + delta:
             continue
+        t = t_start + k
         # The facet's triangles are coplanar: every patch is taken along the facet's contact
         # normal (a triangle's own closest points may lie on its edge, with a tilted normal).
         area, length, px, py, pz, s_uu, s_uw, s_ww = contact_patch(

@@ -1,0 +1,232 @@
+"""Where a step of the numba engine goes: each stage's kernel timed alone on a state taken from a
+run, and for rounded polyhedra the contact geometry split into its parts (broad-phase rejection,
+GJK, the crowned contact, the patch's second moments).
+
+    NUMBA_NUM_THREADS=1 python -m benchmarks.profile_engine [--case feeder-polyhedron feeder-clump
+        settling-1k settling-10k] [--time 3.0] [--repeats 30]
+
+Each figure is the least CPU time (``time.process_time``) of ``--repeats`` timings of one call,
+per step: on a shared machine the least is the figure least disturbed by the others' load.
+``compute_forces`` is called with ``hist_dt = 0`` (forces re-evaluated without advancing the
+springs), so the state does not move between repeats. Not a test: timings depend on the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+
+from dem.conf import JIT_FLAGS  # noqa: E402
+from dem.convex import gjk_distance, place  # noqa: E402
+from dem.crown import crowned_contact  # noqa: E402
+from dem.forces import _crown, _sphere_pair_forces, _wall_forces, compute_forces  # noqa: E402
+from dem.integrate import drift, kick, update_omega, update_spheres  # noqa: E402
+from dem.neighbours import N_PAIRS, rebuild_lists  # noqa: E402
+from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry  # noqa: E402
+
+FEEDER_CONFIG = "examples/feeder-quick.toml"
+
+
+def feeder_state(representation: str, until: float, seed: int = 1):
+    """The quick feeder's engine (E = 1e7 Pa) run to ``until`` seconds."""
+    from dem.scenarios.base import merged_params
+    from dem.scenarios.feeder import _FeederRun
+    from dem.scenarios.feeder_config import load_feeder_config
+
+    config = load_feeder_config(FEEDER_CONFIG)
+    config.items.representation = representation
+    config.stages.vibration_time = max(0.0, until - config.stages.vibration_start)
+    config.run.stop_when_empty = False
+    params, problem = merged_params(config.params, {"E": 1e7})
+    assert not problem, problem
+    run = _FeederRun(config, params, seed, None)
+    run.execute(time.monotonic(), None, None, None)
+    return run.sim
+
+
+def settling_state(n: int, steps: int):
+    """``benchmarks.dem_spheres``' settling case of about n spheres after ``steps`` steps."""
+    sys.path.insert(0, str(Path(__file__).parent))  # dem_spheres imports the liggghts module beside it
+    from benchmarks.dem_spheres import build
+
+    sim = build(n)
+    sim.run(steps * sim.dt)
+    return sim
+
+
+@numba.njit(**JIT_FLAGS)
+def _rounded_pair_geometry(bodies, spheres, pairs, which):
+    """The geometry of every listed pair with a rounded piece, without forces: ``which`` 0 the
+    whole ``pair_geometry``, 1 GJK only, 2 GJK and the crowned contact (no patch)."""
+    from_gjk = 0.0
+    sbody, count, start = spheres.body, spheres.core_count, spheres.core_start
+    for p in range(pairs.count[N_PAIRS]):
+        i, j = pairs.i[p], pairs.j[p]
+        if count[i] == 0 and count[j] == 0:
+            continue
+        dx = spheres.x[i, 0] - spheres.x[j, 0]
+        dy = spheres.x[i, 1] - spheres.x[j, 1]
+        dz = spheres.x[i, 2] - spheres.x[j, 2]
+        rs = spheres.radius[i] + spheres.radius[j]
+        if dx * dx + dy * dy + dz * dz >= rs * rs:
+            continue
+        ba, bb = sbody[i], sbody[j]
+        if count[i] > 0:
+            va, a = spheres.core, place(start[i], count[i], bodies.rot[ba], bodies.pos[ba])
+        else:
+            va, a = spheres.x, place(i, 1, spheres.eye, spheres.zero)
+        if count[j] > 0:
+            vb, b = spheres.core, place(start[j], count[j], bodies.rot[bb], bodies.pos[bb])
+        else:
+            vb, b = spheres.x, place(j, 1, spheres.eye, spheres.zero)
+        ra, rb = spheres.rounding[i], spheres.rounding[j]
+        if which == 0:
+            axis = pairs.axis[p].copy()
+            r = pair_geometry(
+                va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, spheres.work
+            )
+            from_gjk += r[0]
+            continue
+        d, ax, ay, az, bx, by, bz = gjk_distance(va, a, vb, b)
+        from_gjk += d
+        if which == 2 and d > 0.0 and ra + rb - d > 0.0:
+            tol = 4.0 * (spheres.crown[i, 2] + spheres.crown[j, 2])
+            r = crowned_contact(
+                va,
+                a,
+                _crown(spheres, i),
+                vb,
+                b,
+                _crown(spheres, j),
+                (ax, ay, az),
+                (bx, by, bz),
+                tol,
+                spheres.work,
+            )
+            from_gjk += r[0]
+    return from_gjk
+
+
+@numba.njit(**JIT_FLAGS)
+def _rounded_facet_geometry(bodies, spheres, walls, wall_pairs):
+    """``facet_geometry`` of every listed piece-facet pair (no forces)."""
+    facets = walls.facets
+    tri_flat = facets.tri.reshape((-1, 3))
+    total = 0.0
+    for p in range(wall_pairs.count[N_PAIRS]):
+        i, f = wall_pairs.i[p], wall_pairs.f[p]
+        if spheres.core_count[i] == 0:
+            continue
+        b = spheres.body[i]
+        w = facets.wall[f]
+        core = place(spheres.core_start[i], spheres.core_count[i], bodies.rot[b], bodies.pos[b])
+        facet = WallFacet(
+            facets.tri_start[f],
+            facets.tri_count[f],
+            (walls.disp[w, 0], walls.disp[w, 1], walls.disp[w, 2]),
+            (facets.normal[f, 0], facets.normal[f, 1], facets.normal[f, 2]),
+            facets.offset[f],
+        )
+        r = facet_geometry(
+            spheres.core, core, spheres.rounding[i], _crown(spheres, i), tri_flat, facet, spheres.work
+        )
+        total += r[0]
+    return total
+
+
+def _least(fn, repeats: int) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.process_time()
+        fn()
+        best = min(best, time.process_time() - t0)
+    return best
+
+
+def profile(sim, repeats: int) -> list[tuple[str, float]]:
+    """(stage, least CPU seconds of one call) for the simulation's current state."""
+    sim._prepare()
+    bodies, spheres = sim.bodies.arrays(), sim.spheres.arrays()
+    walls, lists, settings = sim._walls, sim._lists, sim._settings
+    rebuild_lists(lists, spheres, bodies.active, walls, settings.skin, settings.cell_min)
+    mat, grav, lim = settings.material, settings.gravity, settings.overlap_limit
+    dt = sim.dt
+    saved = {k: np.copy(getattr(bodies, k)) for k in ("pos", "quat", "vel", "angmom", "omega", "rot")}
+
+    def restore():
+        for k, v in saved.items():
+            getattr(bodies, k)[...] = v
+
+    lb = np.zeros(3)
+    rows = [
+        ("compute_forces", lambda: compute_forces(bodies, spheres, mat, walls, lists, grav, lim, 0.0)),
+        ("  sphere/piece pairs", lambda: _sphere_pair_forces(bodies, spheres, lists.pairs, lim, 0.0)),
+        (
+            "  sphere/piece-facet pairs",
+            lambda: _wall_forces(bodies, spheres, mat, walls, lists.wall_pairs, lim, 0.0),
+        ),
+    ]
+    if np.any(sim.spheres.arrays().core_count > 0):
+        rows += [
+            (
+                "    pair_geometry (rounded pairs)",
+                lambda: _rounded_pair_geometry(bodies, spheres, lists.pairs, 0),
+            ),
+            ("      GJK only", lambda: _rounded_pair_geometry(bodies, spheres, lists.pairs, 1)),
+            ("      GJK + crowned_contact", lambda: _rounded_pair_geometry(bodies, spheres, lists.pairs, 2)),
+            (
+                "    facet_geometry (piece-facet)",
+                lambda: _rounded_facet_geometry(bodies, spheres, walls, lists.wall_pairs),
+            ),
+        ]
+    rows += [
+        ("kick", lambda: kick(bodies, 0.5 * dt)),
+        ("drift (restored after)", lambda: (drift(bodies, lb, dt), restore())),
+        (
+            "update_spheres + omega",
+            lambda: (update_spheres(spheres, bodies, lists.grid.x_build), update_omega(bodies)),
+        ),
+        (
+            "list rebuild (per build)",
+            lambda: rebuild_lists(lists, spheres, bodies.active, walls, settings.skin, settings.cell_min),
+        ),
+    ]
+    for _, fn in rows:  # compile
+        fn()
+    return [(name, _least(fn, repeats)) for name, fn in rows]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--case", nargs="+", default=["feeder-polyhedron", "feeder-clump"])
+    parser.add_argument("--time", type=float, default=3.0, help="feeder: simulated time of the state, s")
+    parser.add_argument("--steps", type=int, default=30_000, help="settling: steps before the state")
+    parser.add_argument("--repeats", type=int, default=30)
+    args = parser.parse_args()
+    for case in args.case:
+        if case.startswith("feeder-"):
+            sim = feeder_state(case.removeprefix("feeder-"), args.time)
+        else:
+            sim = settling_state(int(case.removeprefix("settling-").replace("k", "000")), args.steps)
+        n_pairs = int(sim._lists.pairs.count[N_PAIRS])
+        n_wall = int(sim._lists.wall_pairs.count[N_PAIRS])
+        active = int(np.sum(sim.bodies.active[: sim.bodies.n]))
+        print(
+            f"{case}: t = {sim.t:.3f} s, {active} bodies, {sim.spheres.n} sphere rows, "
+            f"{n_pairs} listed pairs, "
+            f"{n_wall} listed wall pairs, {sim.n_contacts} contacts"
+        )
+        for name, seconds in profile(sim, args.repeats):
+            print(f"  {name:<36} {1e6 * seconds:10.1f} us")
+
+
+if __name__ == "__main__":
+    main()
