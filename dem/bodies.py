@@ -22,6 +22,7 @@ import numpy as np
 
 from dem.clump import Clump
 from dem.convex import scratch
+from dem.frames import transform
 from dem.polyhedra import Polyhedron
 
 
@@ -212,7 +213,7 @@ class Spheres:
         self._body[start : start + k] = body
         self._radius[start : start + k] = radius
         self._offset[start : start + k] = offset
-        self._x[start : start + k] = position + offset @ rot.T
+        self._x[start : start + k] = position + transform(offset, rot.T)
         self._rounding[start : start + k] = rounding
         self._core_count[start : start + k] = core_count
         self._crown[start : start + k] = crown

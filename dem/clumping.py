@@ -50,6 +50,7 @@ from scipy.spatial.distance import cdist
 
 from dem.clump import Clump
 from dem.conf import JIT_FLAGS
+from dem.frames import norm, smallest_singular_value, symmetric_eigen, transform
 from dem.mesh import MeshError, decimate, mass_properties, mesh_digest
 
 logger = logging.getLogger(__name__)
@@ -192,8 +193,8 @@ def _grid_candidates(mesh: trimesh.Trimesh, count: int = 1000) -> np.ndarray:
     """About ``count`` points on a grid along the principal axes, centred on the box that bounds
     the mesh in that frame, with an odd number of points per axis so that the centre plane of a
     slab (where its largest inscribed spheres sit) is always on the grid."""
-    _, axes = np.linalg.eigh(mesh.moment_inertia)
-    local = (mesh.vertices - mesh.centroid) @ axes
+    _, axes = symmetric_eigen(mesh.moment_inertia)
+    local = transform(mesh.vertices - mesh.centroid, axes)
     low, high = local.min(axis=0), local.max(axis=0)
     spacing = float(np.prod(high - low) / count) ** (1.0 / 3.0)
     half_counts = np.floor(0.5 * (high - low) / spacing).astype(int)
@@ -202,7 +203,7 @@ def _grid_candidates(mesh: trimesh.Trimesh, count: int = 1000) -> np.ndarray:
         for lo, hi, n in zip(low, high, half_counts, strict=True)
     ]
     grid = np.stack(np.meshgrid(*axes_points, indexing="ij"), axis=-1).reshape(-1, 3)
-    return mesh.centroid + grid @ axes.T
+    return mesh.centroid + transform(grid, axes.T)
 
 
 def _greedy_cover(
@@ -255,7 +256,7 @@ def _fit_spheres(
             work = decimate(mesh, target_faces=WORKING_FACES)
         except MeshError as exc:
             logger.info("fitting on the full mesh (%d faces): %s", len(mesh.faces), exc)
-    size = float(np.linalg.norm(work.extents))
+    size = norm(work.extents)
     points, normals = _surface_samples(work, _N_COVER_SAMPLES, seed)
     centres = _medial_candidates(points, normals, size)
     depth = signed_distance(work, centres)
@@ -344,17 +345,17 @@ def _load(path: Path, name: str) -> Clump | None:
         return None
 
 
-
 def _assemble(centres: np.ndarray, radius: np.ndarray, properties, max_error: float, name: str) -> Clump:
     """A Clump from sphere centres in mesh coordinates and the mesh's mass properties: the
     spheres are moved into the principal frame, mass and inertia are the mesh's own."""
     return Clump(
         radius=np.asarray(radius, dtype=np.float64),
-        offset=(centres - properties.com) @ properties.principal_axes,
+        offset=transform(centres - properties.com, properties.principal_axes),
         **properties.body_fields(),
         max_error=max_error,
         name=name,
     )
+
 
 def make_clump(
     mesh: trimesh.Trimesh,
@@ -440,7 +441,7 @@ def deform_clump(
     """
     matrix = np.asarray(matrix, dtype=np.float64)
     properties = mass_properties(mesh, mass=mass, density=density)
-    centres = (clump.com + clump.offset @ clump.axes.T) @ matrix.T
-    radius = clump.radius * float(np.linalg.svd(matrix, compute_uv=False).min())
+    centres = transform(clump.com + transform(clump.offset, clump.axes.T), matrix.T)
+    radius = clump.radius * smallest_singular_value(matrix)
     fit = clump_fit(mesh, centres, radius)
     return _assemble(centres, radius, properties, fit.max_error, name)

@@ -18,6 +18,7 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
+from dem.frames import dot, norm
 
 if TYPE_CHECKING:
     from dem.walls import WallMesh
@@ -58,9 +59,9 @@ def build_facets(walls: list[WallMesh]) -> Facets:
             los.append(corners.reshape(-1, 3).min(axis=0))
             his.append(corners.reshape(-1, 3).max(axis=0))
             normal = np.cross(corners[0, 1] - corners[0, 0], corners[0, 2] - corners[0, 0])
-            normal /= np.linalg.norm(normal)
+            normal /= norm(normal)
             normals.append(normal)
-            offsets.append(float(normal @ corners[0, 0]))
+            offsets.append(dot(normal, corners[0, 0]))
             n_tri += len(facet)
     if not tris:
         return Facets(

@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from dem.frames import principal_axes
+
 logger = logging.getLogger(__name__)
 
 ALLOWED_FILE_TYPES = ("stl", "obj", "ply")
@@ -104,7 +106,10 @@ class MassProperties:
     def body_fields(self) -> dict:
         """What a body in its principal frame keeps of these (``Clump``, ``Polyhedron``)."""
         return dict(
-            mass=self.mass, inertia=self.principal_moments, volume=self.volume, com=self.com,
+            mass=self.mass,
+            inertia=self.principal_moments,
+            volume=self.volume,
+            com=self.com,
             axes=self.principal_axes,
         )
 
@@ -279,9 +284,7 @@ def decimate(
     if not simplified.is_watertight:
         trimesh.repair.fill_holes(simplified)
     if not simplified.is_watertight:
-        raise MeshNotWatertightError(
-            f"decimating to {target} faces opened the mesh; choose a larger target"
-        )
+        raise MeshNotWatertightError(f"decimating to {target} faces opened the mesh; choose a larger target")
     trimesh.repair.fix_normals(simplified)
     logger.info("decimated mesh from %d to %d faces", n_faces, len(simplified.faces))
     return simplified
@@ -303,7 +306,8 @@ def mass_properties(
     """Mass, centre of mass and inertia of the solid bounded by ``mesh``.
 
     Give exactly one of ``mass`` (kg; the density follows from the volume) or ``density``
-    (kg/m^3). The principal axes are the eigenvectors of the inertia tensor, made right-handed.
+    (kg/m^3). The principal axes are the eigenvectors of the inertia tensor, made right-handed
+    (``dem.frames.principal_axes``).
     """
     if (mass is None) == (density is None):
         raise MeshError("give exactly one of mass or density")
@@ -322,9 +326,7 @@ def mass_properties(
     unit.density = 1.0
     inertia = np.asarray(unit.moment_inertia, dtype=np.float64) * density
     inertia = 0.5 * (inertia + inertia.T)
-    moments, axes = np.linalg.eigh(inertia)
-    if np.linalg.det(axes) < 0:
-        axes[:, 2] = -axes[:, 2]
+    moments, axes = principal_axes(inertia)  # not LAPACK's: the same last bit on every machine
     return MassProperties(
         mass=float(mass),
         volume=volume,

@@ -14,6 +14,7 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
+from dem.frames import norm
 
 # Layout of a motion row: kind, direction (3), amplitude, frequency, start_time, ramp_time, phase.
 # A lift uses the amplitude slot for its distance and the frequency slot for its speed, so the
@@ -51,7 +52,7 @@ class SinusoidalTranslation:
         direction = np.asarray(self.direction, dtype=np.float64).reshape(-1)
         if direction.shape != (3,) or not np.all(np.isfinite(direction)) or not np.any(direction):
             raise MotionError(f"direction must be a non-zero 3-vector, got {self.direction!r}")
-        object.__setattr__(self, "direction", tuple(float(v) for v in direction / np.linalg.norm(direction)))
+        object.__setattr__(self, "direction", tuple(float(v) for v in direction / norm(direction)))
         if not math.isfinite(self.phase):
             raise MotionError(f"phase must be a finite angle in radians, got {self.phase!r}")
         for name in ("amplitude", "frequency", "start_time", "ramp_time"):
@@ -97,7 +98,7 @@ class LinearLift:
         direction = np.asarray(self.direction, dtype=np.float64).reshape(-1)
         if direction.shape != (3,) or not np.all(np.isfinite(direction)) or not np.any(direction):
             raise MotionError(f"direction must be a non-zero 3-vector, got {self.direction!r}")
-        object.__setattr__(self, "direction", tuple(float(v) for v in direction / np.linalg.norm(direction)))
+        object.__setattr__(self, "direction", tuple(float(v) for v in direction / norm(direction)))
         for name in ("distance", "start_time"):
             value = getattr(self, name)
             if not math.isfinite(value) or value < 0:

@@ -25,6 +25,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
+from dem.frames import smallest_singular_value, transform
 from dem.mesh import MeshError, mass_properties
 
 ROUNDING_FRACTION = 0.25  # default r as a fraction of a piece's thinnest dimension
@@ -125,7 +126,7 @@ def shrink_convex(points: np.ndarray, rounding: float) -> np.ndarray:
     equations = hull.equations.copy()  # rows (n, c): n . x + c <= 0 inside
     equations[:, 3] += rounding
     centre = points[hull.vertices].mean(axis=0)
-    depth = -(equations[:, :3] @ centre + equations[:, 3])
+    depth = -(transform(equations[:, :3], centre[:, None])[:, 0] + equations[:, 3])
     if depth.min() <= 1e-9 * np.ptp(points, axis=0).max():
         raise PolyhedronError(
             f"rounding {rounding:.4g} m leaves no core: the piece is thinner than 2 r; use a smaller rounding"
@@ -209,7 +210,7 @@ def _assemble(mesh_core, starts, counts, rounding, properties, name) -> Polyhedr
     """A Polyhedron from cores in mesh coordinates and the mesh's mass properties: the cores are
     moved into the principal frame, mass and inertia are the mesh's own."""
     return Polyhedron(
-        core=np.ascontiguousarray((mesh_core - properties.com) @ properties.principal_axes),
+        core=np.ascontiguousarray(transform(mesh_core - properties.com, properties.principal_axes)),
         piece_start=np.asarray(starts, dtype=np.int64),
         piece_count=np.asarray(counts, dtype=np.int64),
         rounding=float(rounding),
@@ -238,8 +239,8 @@ def deform_polyhedron(
     mass properties are the new mesh's."""
     matrix = np.asarray(matrix, dtype=np.float64)
     properties = mass_properties(mesh, mass=mass)
-    mesh_core = (poly.com + poly.core @ poly.axes.T) @ matrix.T
-    rounding = poly.rounding * float(np.linalg.svd(matrix, compute_uv=False).min())
+    mesh_core = transform(poly.com + transform(poly.core, poly.axes.T), matrix.T)
+    rounding = poly.rounding * smallest_singular_value(matrix)
     return _assemble(mesh_core, poly.piece_start, poly.piece_count, rounding, properties, name)
 
 
@@ -249,7 +250,7 @@ def surface_gap(poly: Polyhedron, mesh: trimesh.Trimesh, n_samples: int = 4000, 
     from dem.convex import gjk_distance, place
 
     points, _ = trimesh.sample.sample_surface_even(mesh, n_samples, seed=seed)
-    local = np.ascontiguousarray((np.asarray(points) - poly.com) @ poly.axes)
+    local = np.ascontiguousarray(transform(np.asarray(points) - poly.com, poly.axes))
     eye, origin = np.eye(3), np.zeros(3)
     gaps = np.empty(len(local))
     for s in range(len(local)):

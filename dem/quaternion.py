@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
+from dem.frames import norm
 
 # Below this half angle (rad) the Taylor series of sin and cos, to the terms kept, are exact to
 # rounding; they are several times cheaper than the libm calls. Coefficients are multiplied, not
@@ -142,14 +143,14 @@ def isotropic_rotor_step(q, angmom, inertia, h):
 def matrix(q) -> np.ndarray:
     """Rotation matrix of a quaternion (numpy convenience for drivers and tests)."""
     out = np.empty((3, 3))
-    to_matrix(np.asarray(q, dtype=np.float64) / np.linalg.norm(q), out)
+    to_matrix(np.asarray(q, dtype=np.float64) / norm(q), out)
     return out
 
 
 def from_axis_angle(axis, angle: float) -> np.ndarray:
     """Quaternion turning by ``angle`` (rad) about ``axis``."""
     axis = np.asarray(axis, dtype=np.float64)
-    axis = axis / np.linalg.norm(axis)
+    axis = axis / norm(axis)
     return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis])
 
 

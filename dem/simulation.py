@@ -37,6 +37,7 @@ from dem.bodies import Bodies, Spheres
 from dem.clump import Clump
 from dem.contact import ContactParams, wall_stiffness
 from dem.facets import closest_point_on_facet
+from dem.frames import norm, transform
 from dem.materials import Interaction, MaterialTable
 from dem.motion import evaluate
 from dem.polyhedra import Polyhedron
@@ -151,9 +152,9 @@ class Simulation:
         simulation's ``params``); returns its index."""
         position = _vector(position, 3, "position")
         q = _vector(quaternion, 4, "quaternion")
-        if np.linalg.norm(q) == 0:
+        if norm(q) == 0:
             raise SimulationError("quaternion must not be zero")
-        q = q / np.linalg.norm(q)
+        q = q / norm(q)
         inertia = _vector(clump.inertia, 3, "body inertia")
         if isinstance(clump, Polyhedron):
             if not clump.mass > 0 or np.any(inertia <= 0) or clump.n_pieces == 0 or not clump.rounding > 0:
@@ -169,7 +170,7 @@ class Simulation:
         rot = np.empty((3, 3))
         to_matrix(q, rot)
         omega = _vector(omega, 3, "omega")
-        angmom = rot @ (inertia * (rot.T @ omega))
+        angmom = transform(inertia * transform(omega, rot), rot.T)
         if not any(c is clump for c in self._clumps):
             self._clumps.append(clump)
         b = self.bodies.append(

@@ -28,6 +28,7 @@ import numpy as np
 
 from dem.clump import Clump
 from dem.contact import ContactParams, normal_stiffness, series, wall_stiffness
+from dem.frames import norm, transform
 from dem.polyhedra import Polyhedron
 
 DEFAULT_FRACTION = 1.0 / 20.0
@@ -48,16 +49,17 @@ def effective_mass(clump: Clump | Polyhedron) -> float:
     inv_inertia = np.diag(1.0 / np.asarray(clump.inertia, dtype=np.float64))
     worst = 0.0
     for c in lever_points(clump):
-        length = float(np.linalg.norm(c))
+        length = norm(c)
         if length == 0.0:
             continue
         axis = c / length
         helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         u = np.cross(axis, helper)
-        u /= np.linalg.norm(u)
+        u /= norm(u)
         basis = np.stack([u, np.cross(axis, u)])
-        projected = basis @ inv_inertia @ basis.T
-        worst = max(worst, length * length * float(np.linalg.eigvalsh(projected)[-1]))
+        (p_uu, p_uv), (_, p_vv) = transform(transform(basis, inv_inertia), basis.T).tolist()
+        largest = 0.5 * (p_uu + p_vv) + math.sqrt(0.25 * (p_uu - p_vv) ** 2 + p_uv * p_uv)
+        worst = max(worst, length * length * largest)
     return 1.0 / (1.0 / clump.mass + worst)
 
 

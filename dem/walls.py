@@ -22,6 +22,7 @@ import numpy as np
 
 from dem.contact import ContactParams
 from dem.facets import Facets, build_facets
+from dem.frames import dot, norm
 from dem.motion import MOTION_ROW, Motion, motion_row
 
 log = logging.getLogger(__name__)
@@ -96,10 +97,10 @@ class WallMesh:
         """A square of side ``size`` centred on ``point`` with the given normal."""
         point = np.asarray(point, dtype=np.float64)
         normal = np.asarray(normal, dtype=np.float64)
-        normal = normal / np.linalg.norm(normal)
+        normal = normal / norm(normal)
         helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         u = np.cross(normal, helper)
-        u /= np.linalg.norm(u)
+        u /= norm(u)
         v = np.cross(normal, u)
         h = 0.5 * size
         corners = np.array(
@@ -134,7 +135,7 @@ def _group_planar_facets(vertices: np.ndarray, faces: np.ndarray) -> list[np.nda
         for a, b in ((face[0], face[1]), (face[1], face[2]), (face[2], face[0])):
             edge = (int(min(a, b)), int(max(a, b)))
             other = owner.setdefault(edge, t)
-            if other != t and abs(float(normals[t] @ normals[other])) >= _COPLANAR_COS:
+            if other != t and abs(dot(normals[t], normals[other])) >= _COPLANAR_COS:
                 ra, rb = root(t), root(other)
                 if ra != rb:
                     parent[max(ra, rb)] = min(ra, rb)

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from dem import quaternion
+from dem.frames import norm, transform
 from dem.result import SimulationResult, SimulationStatus
 from dem.scenarios.base import Response, RunControl, Scenario, merged_params
 from dem.scenarios.feeder_config import FeederConfig, ItemsConfig, load_feeder_config
@@ -99,7 +100,7 @@ def run_feeder(
 def random_rotation(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """A uniformly random orientation: unit quaternion (scalar first) and its rotation matrix."""
     q = rng.normal(size=4)
-    q /= np.linalg.norm(q)
+    q /= norm(q)
     return q, quaternion.matrices(q[None, :])[0]
 
 
@@ -192,7 +193,7 @@ class _FeederRun:
         for i in np.flatnonzero(self.state == 1):
             b = self.body_of[i]
             rotation = quaternion.matrices(np.asarray(bodies.quat[b])[None, :])[0]
-            points = self.tray.to_tray_frame(np.asarray(bodies.pos[b]) + self.hulls[i] @ rotation.T)
+            points = self.tray.to_tray_frame(np.asarray(bodies.pos[b]) + transform(self.hulls[i], rotation.T))
             boxes.append((points.min(axis=0), points.max(axis=0)))
         return boxes
 
@@ -205,7 +206,7 @@ class _FeederRun:
         best = None
         for _ in range(self.PLACEMENT_TRIES):
             quat, rotation = random_rotation(self.rng)
-            local = self.tray.to_tray_frame(self.hulls[i] @ rotation.T)
+            local = self.tray.to_tray_frame(transform(self.hulls[i], rotation.T))
             low, high = local.min(axis=0), local.max(axis=0)
             span_x = (x0 + gap - low[0], x1 - gap - high[0])
             span_y = (y0 + gap - low[1], y1 - gap - high[1])
@@ -433,7 +434,7 @@ def body_frame_hull(item) -> np.ndarray:
     """Convex hull vertices of an item's mesh in its body (principal) frame, m."""
     shape = item.shape
     hull = item.mesh.convex_hull.vertices
-    return (np.asarray(hull, dtype=float) - np.asarray(shape.com)) @ np.asarray(shape.axes)
+    return transform(np.asarray(hull, dtype=float) - np.asarray(shape.com), shape.axes)
 
 
 def _run(config: FeederConfig, params: dict[str, float], seed: int, control: RunControl) -> SimulationResult:

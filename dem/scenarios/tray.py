@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from dem.frames import transform
+
 
 class TrayConfig(BaseModel):
     """Tray geometry in metres and degrees; see the module docstring for the frame."""
@@ -73,11 +75,11 @@ class TrayGeometry:
 
     def to_tray_frame(self, points: np.ndarray) -> np.ndarray:
         """World points (n, 3) in the tray frame."""
-        return np.asarray(points, dtype=float) @ self.tray_to_world
+        return transform(points, self.tray_to_world)
 
     def to_world(self, points: np.ndarray) -> np.ndarray:
         """Tray-frame points (n, 3) in the world frame."""
-        return np.asarray(points, dtype=float) @ self.tray_to_world.T
+        return transform(points, self.tray_to_world.T)
 
     @property
     def inlet_area(self) -> float:
@@ -164,7 +166,7 @@ def build_tray(config: TrayConfig) -> TrayGeometry:
         height = float(vertices[:, 2].max())
     rotation = tilt_rotation(config.tilt_deg)
     return TrayGeometry(
-        vertices=vertices @ rotation.T,
+        vertices=transform(vertices, rotation.T),
         faces=faces,
         tray_to_world=rotation,
         outlet_x=outlet_x,
