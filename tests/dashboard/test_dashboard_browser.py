@@ -15,7 +15,7 @@ import pytest
 from optimizer.protocols import StudyStatus
 from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
-from tests.dashboard.seed import add_finished_trials, seed_study, seed_validated_study
+from tests.dashboard.seed import VALIDATED_MEASURED, add_finished_trials, seed_study, seed_validated_study
 
 pytestmark = pytest.mark.browser
 
@@ -465,3 +465,45 @@ def test_the_validation_table_shows_what_the_driver_stored_after_validating(page
     assert all(values in text for values, text in zip(fresh, rows, strict=True))
     assert page.errors == []
     save_screenshot(page, "dashboard-validation")
+
+
+def test_a_study_with_mu_wall_shows_it_in_its_plots_tables_and_trials_and_one_without_does_not(
+    page, dashboard
+):
+    from optimizer.driver import Driver
+    from optimizer.memory import SyntheticExecutor
+
+    definition = parse_study({
+        "name": "wall-study", "scenario": {}, "experiment": {"measured": VALIDATED_MEASURED, "tolerance": 1},
+        "parameters": {"mu_wall": {"low": 0.2, "high": 0.6}},
+        "ga": {"population": 16, "offspring": 8, "generations": 4}, "validation": {"seeds": 0},
+    })  # fmt: skip
+    study_id = dashboard.store.create_study(definition.model_dump(mode="json"), owner="alice")
+    Driver(dashboard.store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    trial = dashboard.store.trials(study_id)[0].spec
+    page.set_default_timeout(60_000)  # Plotly's four pages on a loaded machine take their time
+
+    page.goto(dashboard.url(f"/studies/{study_id}"), wait_until="domcontentloaded")
+    page.wait_for_function(PLOTTED, arg="parameter-plot")
+    page.wait_for_selector("#equivalent tbody tr td.num")
+    panels = page.evaluate(
+        """() => { const l = document.getElementById('parameter-plot')._fullLayout;
+             return Object.keys(l).filter((k) => /^yaxis\\d*$/.test(k)).map((k) => l[k].title.text); }"""
+    )
+    header = page.locator("#equivalent thead th").all_inner_texts()
+    recommendation = page.locator("#recommendation").inner_text()
+    hover = page.evaluate("() => document.getElementById('parameter-plot').data[0].customdata[0][8]")
+    page.goto(dashboard.url(f"/trials/{trial.trial_id}"), wait_until="domcontentloaded")
+    page.wait_for_selector("text=item-wall friction")
+    trial_page = page.locator("body").inner_text()
+    page.goto(dashboard.url(f"/studies/{dashboard.study.study_id}"), wait_until="domcontentloaded")
+    page.wait_for_selector("#equivalent tbody tr td.num")
+    old_header = page.locator("#equivalent thead th").all_inner_texts()
+
+    assert "item-wall friction μ_wall (–)" in panels and len(panels) == 5  # E, nu, e, mu, mu_wall
+    assert header[1:6] == ["E (Pa)", "ν (–)", "e (–)", "μ (–)", "μ_wall (–)"]
+    assert "item-wall friction μ_wall (–)" in recommendation
+    assert hover.startswith("μ_wall = ")
+    assert js_fmt(trial.params["mu_wall"]) in trial_page
+    assert "μ_wall (–)" not in old_header and "μ (–)" in old_header
+    assert page.errors == []

@@ -218,12 +218,28 @@ export function fmtSeconds(s) {
   return `${fmt(s / 3600, 3)} h`;
 }
 
+// The items' four, then the optional item-wall ones (dem/parameters.py): a study shows a wall
+// parameter only when its definition names it (parametersOf), a trial only when it carries it.
 export const PARAMETERS = [
   { key: "E", label: "E", unit: "Pa", title: "Young's modulus E (Pa)", log: true },
   { key: "nu", label: "ν", unit: "–", title: "Poisson's ratio ν (–)", log: false },
   { key: "e", label: "e", unit: "–", title: "restitution e (–)", log: false },
   { key: "mu", label: "μ", unit: "–", title: "friction μ (–)", log: false },
+  { key: "E_wall", label: "E_wall", unit: "Pa", title: "walls' Young's modulus E_wall (Pa)", log: true, wall: true },
+  { key: "e_wall", label: "e_wall", unit: "–", title: "item-wall restitution e_wall (–)", log: false, wall: true },
+  { key: "mu_wall", label: "μ_wall", unit: "–", title: "item-wall friction μ_wall (–)", log: false, wall: true },
 ];
+
+// The parameters of a study (its definition's): the items' four and the wall ones it names.
+export function parametersOf(definition) {
+  const named = definition?.parameters || {};
+  return PARAMETERS.filter((p) => !p.wall || named[p.key] != null);
+}
+
+// The parameters a set of values carries (a trial's, a recommendation's).
+export function parametersIn(params) {
+  return PARAMETERS.filter((p) => !p.wall || params?.[p.key] != null);
+}
 
 export function el(tag, attrs = {}, ...children) {
   const node = document.createElement(tag);

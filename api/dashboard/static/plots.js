@@ -1,7 +1,7 @@
 // Plot builders shared by the study page: pure functions from trials to plotly traces/layouts.
 // They never fetch and never touch the DOM, so the page decides when to draw.
 
-import { PARAMETERS, fmt, measuredValue, responseHtml, unitOf, withUnit } from "./api.js";
+import { PARAMETERS, fmt, measuredValue, parametersIn, responseHtml, unitOf, withUnit } from "./api.js";
 
 // Above this many points SVG gets slow; WebGL (scattergl) draws 10,000 points in milliseconds.
 const WEBGL_ABOVE = 1500;
@@ -56,16 +56,24 @@ function byGeneration(trials, value) {
 }
 
 // customdata[5] holds the trial's responses as text ("N<sub>t</sub> = 3 items"), one line each.
+// customdata[8] the item-wall parameters the trial carries, one line each ("" without them).
 const HOVER =
   "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br>" +
   "E = %{customdata[1]:.3s}Pa<br>ν = %{customdata[2]:.3f}<br>e = %{customdata[3]:.3f}<br>" +
-  "μ = %{customdata[4]:.3f}<br>%{customdata[5]}<extra></extra>";
+  "μ = %{customdata[4]:.3f}<br>%{customdata[8]}%{customdata[5]}<extra></extra>";
+
+function wallLines(t, before = false) {
+  return parametersIn(t.params).filter((p) => p.wall).map((p) => {
+    const line = `${p.label} = ${fmt(t.params[p.key], 3)}${p.unit === "Pa" ? " Pa" : ""}`;
+    return before ? `<br>${line}` : `${line}<br>`;
+  }).join("");
+}
 
 function customdata(trials, responses) {
   return trials.map((t) => [
     t.id, t.params.E, t.params.nu, t.params.e, t.params.mu,
     responses.map((r) => `${responseHtml(r)} = ${withUnit(measuredValue(t, r), r, 4)}`).join("<br>"),
-    t.generation,
+    t.generation, null, wallLines(t),
   ]);
 }
 
@@ -146,12 +154,12 @@ export function failureCounts(trials) {
 const FAILED_HOVER =
   "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br><b>%{customdata[7]}</b>: %{customdata[5]}, " +
   "not ranked<br>E = %{customdata[1]:.3s}Pa<br>ν = %{customdata[2]:.3f}<br>e = %{customdata[3]:.3f}<br>" +
-  "μ = %{customdata[4]:.3f}<extra></extra>";
+  "μ = %{customdata[4]:.3f}%{customdata[8]}<extra></extra>";
 
 function failedCustomdata(trials, failures, responses) {
   return trials.map((t) => [
     t.id, t.params.E, t.params.nu, t.params.e, t.params.mu, noneHtml(responses), t.generation,
-    t.status === "ok" ? `${failures.get(t.individual)} (another replicate)` : t.status,
+    t.status === "ok" ? `${failures.get(t.individual)} (another replicate)` : t.status, wallLines(t, true),
   ]);
 }
 
@@ -378,7 +386,9 @@ export function progressFigure(progress, f1unit) {
 // skipped. A large study gets a box per generation instead of its points: four panels of
 // 10,000 coloured points cost seconds to draw, and the boxes show the narrowing just as well.
 export function parameterFigure(trials, bounds, maxGeneration, responses, f1unit) {
-  const free = PARAMETERS.filter((p) => !bounds[p.key] || bounds[p.key].fixed == null);
+  // An item parameter without bounds has the default ones; a wall one the study does not name
+  // is no parameter of it.
+  const free = PARAMETERS.filter((p) => (p.wall ? bounds[p.key] != null : true) && bounds[p.key]?.fixed == null);
   const all = trials.filter((t) => t.params && t.state !== "cancelled");
   const boxes = all.length > WEBGL_ABOVE;
   // Where the search went (all proposals, for the medians and boxes); the points are coloured by

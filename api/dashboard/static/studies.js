@@ -3,13 +3,14 @@
 // request per refresh: the list items carry everything the table shows.
 
 import {
-  PARAMETERS, api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, poll, showBanner, statusBadge, withUnit,
+  api, apiKey, clearBanner, el, fmt, fmtTime, generationText, itemsOf, parametersIn, poll, showBanner, statusBadge,
+  withUnit,
 } from "./api.js";
 
 const POLL_MS = 4000;
 
 function paramsText(params) {
-  return PARAMETERS.map((p) => `${p.label} = ${fmt(params[p.key])}`).join(", ");
+  return parametersIn(params).map((p) => `${p.label} = ${fmt(params[p.key])}`).join(", ");
 }
 
 function recommendationText(item) {

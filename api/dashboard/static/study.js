@@ -7,7 +7,7 @@
 
 import {
   ApiError, PARAMETERS, api, apiKey, clearBanner, el, experimentResponses, fmt, fmtTime, generationText,
-  itemsOf, measuredValue, poll, plotlyReady, responseHtml, responseText, showBanner, statusBadge, unitOf,
+  itemsOf, measuredValue, parametersIn, parametersOf, poll, plotlyReady, responseHtml, responseText, showBanner, statusBadge, unitOf,
   withUnit,
 } from "./api.js";
 import {
@@ -50,6 +50,7 @@ async function loadTrialChanges() {
 }
 
 function renderHeader() {
+  showWallColumns();
   document.getElementById("study-name").textContent = study.name || study.id;
   document.title = `${study.name || study.id} · demcal`;
   const status = document.getElementById("study-status");
@@ -128,8 +129,19 @@ async function renderPlots() {
   if (!performance.getEntriesByName("demcal:plots-drawn").length) performance.mark("demcal:plots-drawn");
 }
 
+// The study's parameters (the items' four and the wall ones it names), as table cells; the tables'
+// headers get a column for each wall one after μ (showWallColumns).
 function paramCells(params) {
-  return PARAMETERS.map((p) => el("td", { class: "num", text: fmt(params?.[p.key], 4) }));
+  return parametersOf(study?.definition).map((p) => el("td", { class: "num", text: fmt(params?.[p.key], 4) }));
+}
+
+function showWallColumns() {
+  for (const mu of document.querySelectorAll("th[data-after-parameters]")) {
+    if (mu.dataset.done) continue;
+    mu.dataset.done = "1";
+    const walls = parametersOf(study?.definition).filter((p) => p.wall);
+    mu.after(...walls.map((p) => el("th", { text: `${p.label} (${p.unit})` })));
+  }
 }
 
 const noneText = () => (responses.length === 1 ? `no ${responseText(responses[0])}` : "no responses");
@@ -174,7 +186,7 @@ async function renderRecommendation() {
         : "No recommendation yet: it appears once a trial matches the experiment within tolerance." }));
   } else {
     const params = rec.params || {};
-    const rows = PARAMETERS.map((p) => [p.title, fmt(params[p.key], 4)]);
+    const rows = parametersIn(params).map((p) => [p.title, fmt(params[p.key], 4)]);
     for (const r of responses) {
       // optimizer.pareto.summary: each experiment's response per replicate (older: N_t only).
       const values = rec.responses?.[r.name] ?? (r.name === "n_remaining" ? rec.n_remaining : undefined);
@@ -215,7 +227,7 @@ async function renderRecommendation() {
       el("td", { class: "num", text: fmt(t.wall_time_s) }));
   });
   tbody.replaceChildren(...(rows.length ? rows
-    : [el("tr", {}, el("td", { colspan: 8, class: "muted", text: "None yet." }))]));
+    : [el("tr", {}, el("td", { colspan: 4 + parametersOf(study?.definition).length, class: "muted", text: "None yet." }))]));
 }
 
 // The validation that ends a study (optimizer/validation.py): each candidate's fresh-seed values

@@ -4,8 +4,8 @@
 // in 3D (replay3d.js) beside a top view on a canvas, with the items retained at the end marked.
 
 import {
-  ApiError, PARAMETERS, api, apiKey, el, experimentResponses, fmt, fmtSeconds, fmtTime, measuredValue,
-  plotlyReady, poll, responseHtml, responseText, showBanner, statusBadge, withUnit,
+  ApiError, api, apiKey, el, experimentResponses, fmt, fmtSeconds, fmtTime, measuredValue,
+  parametersIn, plotlyReady, poll, responseHtml, responseText, showBanner, statusBadge, withUnit,
 } from "./api.js";
 import { CONFIG, baseLayout } from "./plots.js";
 import { draw3d, motionText } from "./replay3d.js";
@@ -32,7 +32,7 @@ function responseValue(trial, response) {
 function facts(trial, declared, experiments, f1unit) {
   const r = trial.result || {};
   const rows = [
-    ...PARAMETERS.map((p) => [p.title, fmt(trial.params?.[p.key], 4)]),
+    ...parametersIn(trial.params).map((p) => [p.title, fmt(trial.params?.[p.key], 4)]),
     ["seed", trial.seed],
     ["generation · individual · replicate", `${trial.generation} · ${trial.individual} · ${trial.replicate}`],
     ["state / simulation status", `${trial.state} / ${trial.status ?? "–"}`],
