@@ -78,6 +78,11 @@ def bootstrap_interval(
     values = np.asarray(values, dtype=float)
     if len(values) == 0:
         raise ValueError("no values to bootstrap")
+    if len(values) == 1:
+        # Every resample is the value itself: the same interval, without 1,000 resamples (a
+        # study of single-replicate trials evaluates thousands of these: benchmarks/README.md).
+        stat = float(statistic(values[None, :])[0])
+        return stat, stat
     rng = np.random.default_rng(seed)
     draws = values[rng.integers(0, len(values), size=(resamples, len(values)))]
     stats = statistic(draws)

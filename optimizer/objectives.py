@@ -38,6 +38,7 @@ This module is pure arithmetic on results: it must not read stores or call simul
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -182,11 +183,15 @@ def _time(result: SimulationResult, objective_time: str) -> float:
     return result.wall_time_s if objective_time == "wall" else result.cost
 
 
-def evaluate(records: Iterable[TrialRecord], definition: StudyDefinition, n_items: int) -> list[Evaluation]:
+def evaluate(
+    records: Iterable[TrialRecord], definition: StudyDefinition, n_items: int, *, intervals: bool = True
+) -> list[Evaluation]:
     """Objectives of every individual whose trials all have results, sorted by individual.
 
     The penalty's f2 is taken over the successful individuals in ``records``, so pass all of a
-    study's trials, not one batch, to penalise consistently.
+    study's trials, not one batch, to penalise consistently. ``intervals=False`` leaves each
+    ``f1_interval`` at (nan, nan): its bootstrap is most of the cost, and views that never show
+    it (progress, identifiability) skip it.
     """
     by_individual: dict[int, list[TrialRecord]] = {}
     validation = definition.validation_batch()
@@ -221,7 +226,12 @@ def evaluate(records: Iterable[TrialRecord], definition: StudyDefinition, n_item
         # Only runs that measured: a failed run's values are where it stopped.
         measured = response_values([result for result in results if result.ok], definition)
         failed = next((result for result in results if not result.ok), None)
-        interval = (f1, f1) if failure else match_interval(measured, definition, seed=individual)
+        if not intervals:
+            interval = (math.nan, math.nan)
+        elif failure:
+            interval = (f1, f1)
+        else:
+            interval = match_interval(measured, definition, seed=individual)
         evaluations.append(
             Evaluation(
                 individual=individual,

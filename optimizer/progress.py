@@ -125,7 +125,8 @@ class ProgressTracker:
         for individual in changed:
             self._current.pop(individual, None)
         group = [record for individual in sorted(changed) for record in self._records[individual]]
-        self._current.update((ev.individual, ev) for ev in evaluate(group, self.definition, self.n_items))
+        evaluated = evaluate(group, self.definition, self.n_items, intervals=False)  # no interval is drawn
+        self._current.update((ev.individual, ev) for ev in evaluated)
         self._simulations += len(records)
         self._failed += sum(not record.result.ok for record in records)
         if self._first_batch is None:

@@ -26,12 +26,17 @@ from optimizer.study import StudyDefinition
 router = APIRouter(prefix="/api/v1/studies", tags=["studies"])
 
 
-def cached_json(request: Request, body: bytes) -> Response:
+def cached_json(request: Request, body: bytes, current: bool = True) -> Response:
     """A polled view's JSON with an ETag (its content's hash) and ``Cache-Control: no-cache``, so
     that a browser asks again each time with ``If-None-Match`` and an unchanged view comes back as
-    an empty 304 instead of its bytes (the dashboard's fetch does this by itself)."""
+    an empty 304 instead of its bytes (the dashboard's fetch does this by itself).
+
+    ``X-Demcal-View`` says whether the view is of the study's current version or a stale one
+    served while the current one builds (progress, identifiability): the dashboard asks for a
+    view again only when the study changed or its last answer was stale. It is on every answer,
+    304s too, because a cache keeps a stored header the 304 does not replace."""
     tag = f'"{hashlib.blake2b(body, digest_size=16).hexdigest()}"'
-    headers = {"ETag": tag, "Cache-Control": "no-cache"}
+    headers = {"ETag": tag, "Cache-Control": "no-cache", "X-Demcal-View": "current" if current else "stale"}
     if tag in request.headers.get("if-none-match", ""):
         return Response(status_code=status.HTTP_304_NOT_MODIFIED, headers=headers)
     return Response(body, media_type="application/json", headers=headers)
@@ -100,7 +105,8 @@ def study_progress(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """Hypervolume, best f1 and best validated f1 against simulations, one point per completed batch."""
-    return cached_json(request, progress.progress_json(store, views, study_id, principal))
+    served = progress.progress_json(store, views, study_id, principal)
+    return cached_json(request, served.body, served.current)
 
 
 @router.get("/{study_id}/identifiability", response_model=IdentifiabilityRead)
@@ -108,7 +114,8 @@ def identifiability(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """Which searched parameters the experiment pins down, from the spread of the matching sets."""
-    return cached_json(request, progress.identifiability_json(store, views, study_id, principal))
+    served = progress.identifiability_json(store, views, study_id, principal)
+    return cached_json(request, served.body, served.current)
 
 
 @router.get("/{study_id}/recommendation", response_model=RecommendationRead)

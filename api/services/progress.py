@@ -17,13 +17,15 @@ import threading
 from api.auth import Principal
 from api.schemas import IdentifiabilityRead, StudyProgressRead
 from api.services.offload import in_child
-from api.services.views import StudyViewCache
+from api.services.views import Served, StudyViewCache
 from api.store import SqlStore
 from optimizer.identifiability import study_identifiability
 from optimizer.objectives import evaluate
 from optimizer.progress import ProgressTracker
 from optimizer.space import ParameterSpace
 from optimizer.study import StudyDefinition
+
+IDENTIFIABILITY_REST = 9.0  # at most a tenth of a core on average, however fast the batches come
 
 
 class _Folded:
@@ -35,7 +37,7 @@ class _Folded:
         self.tracker: ProgressTracker | None = None
 
 
-def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal) -> bytes:
+def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal) -> Served:
     study = store.study_version(study_id, principal.visible_to)
 
     def build() -> bytes:
@@ -53,24 +55,25 @@ def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, princip
         return StudyProgressRead(study_id=study_id, **progress.as_json()).model_dump_json().encode()
 
     version = (study.updated_at, study.generation)
-    return views.get_or_build("progress", study_id, version, build, stale_ok=True)
+    return views.serve("progress", study_id, version, build, stale_ok=True)
 
 
 def identifiability_json(
     store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal
-) -> bytes:
+) -> Served:
     study = store.study_version(study_id, principal.visible_to)
     # Once per completed batch (and status), not per change of the study row (a batch queued,
     # then saved, changes it twice), in the low-priority child process (``offload``): a build
-    # reads and evaluates every trial and fits a Gaussian process, seconds of CPU for a long study.
+    # reads and evaluates every trial and fits a Gaussian process, seconds of CPU for a long study,
+    # so it rests IDENTIFIABILITY_REST times as long before the next (``views``).
     version = (study.generation, study.status)
     build = lambda: in_child(_identifiability, store, study_id)  # noqa: E731 - one line, one use
-    return views.get_or_build("identifiability", study_id, version, build, stale_ok=True)
+    return views.serve("identifiability", study_id, version, build, stale_ok=True, rest=IDENTIFIABILITY_REST)
 
 
 def _identifiability(store: SqlStore, study_id: str) -> bytes:
     definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
-    evaluations = evaluate(store.trials(study_id), definition, definition.n_items())
+    evaluations = evaluate(store.trials(study_id), definition, definition.n_items(), intervals=False)
     space = ParameterSpace(definition.parameters)
     result = study_identifiability(evaluations, definition, space)
     return IdentifiabilityRead(study_id=study_id, **result).model_dump_json().encode()

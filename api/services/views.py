@@ -19,6 +19,14 @@ they took every core (the next poll after a build ends starts the one for the la
 A view may also keep an object between its builds (``kept``): progress folds only the batches
 completed since its previous build.
 
+A background build may also be made to rest (``rest``): after a build that took t seconds, the
+next one of that view and study starts no sooner than ``rest * t`` after it ended, so the view
+never takes more than 1 / (1 + rest) of a core however fast the versions come. Identifiability
+(seconds of CPU for a long study) rests 9 times its build: built after every batch of 20 quick
+trials it took two thirds of a core of a 2-core machine that also served 50 dashboards
+(``benchmarks/README.md``, session 5). ``serve`` says whether what it answers is the current
+version or a stale one, so that a client knows to ask again (``X-Demcal-View``).
+
 What it must not do: decide what a view contains (``api/services/trials.py`` does).
 """
 
@@ -26,14 +34,25 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from concurrent.futures import Future
+from dataclasses import dataclass
 from typing import TypeVar
 
 T = TypeVar("T")
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Served:
+    """A view's bytes, and whether they are of the version asked for (False: an older one, served
+    while the asked version builds or its build rests)."""
+
+    body: bytes
+    current: bool
 
 
 class StudyViewCache:
@@ -46,20 +65,31 @@ class StudyViewCache:
         self._building: dict[tuple[str, str, Hashable], Future] = {}
         self._refreshing: set[tuple[str, str]] = set()  # (view, study id) built in the background
         self._kept: OrderedDict[tuple[str, str], object] = OrderedDict()
+        self._resting: dict[tuple[str, str], float] = {}  # (view, study id) -> monotonic time it may build
         self._lock = threading.Lock()
 
     def get_or_build(
         self, view: str, study_id: str, version: Hashable, build: Callable[[], bytes], stale_ok: bool = False
     ) -> bytes:
+        return self.serve(view, study_id, version, build, stale_ok).body
+
+    def serve(
+        self, view: str, study_id: str, version: Hashable, build: Callable[[], bytes], stale_ok: bool = False,
+        rest: float = 0.0,
+    ) -> Served:
+        """The view at ``version``: cached, or built now (requests for one version wait for one
+        build); with ``stale_ok`` and an older version cached, that one, while the asked version
+        builds in the background, ``rest`` times the previous build's duration after it ended."""
         key = (view, study_id)
         with self._lock:
             entry = self._entries.get(key)
             if entry is not None and entry[0] == version:
                 self._entries.move_to_end(key)
-                return entry[1]
+                return Served(entry[1], True)
             if stale_ok and entry is not None:
-                refresh = key not in self._refreshing
-                self._refreshing.add(key)
+                refresh = key not in self._refreshing and time.monotonic() >= self._resting.get(key, 0.0)
+                if refresh:
+                    self._refreshing.add(key)
             else:
                 pending = self._building.get((*key, version))
                 mine = pending is None
@@ -68,12 +98,12 @@ class StudyViewCache:
         if stale_ok and entry is not None:
             if refresh:
                 threading.Thread(
-                    target=self._refresh, args=(key, version, build), name=f"view-{view}", daemon=True
+                    target=self._refresh, args=(key, version, build, rest), name=f"view-{view}", daemon=True
                 ).start()
-            return entry[1]
+            return Served(entry[1], False)
         if mine:
             self._build(key, version, build, pending)
-        return pending.result()
+        return Served(pending.result(), True)
 
     def kept(self, view: str, study_id: str, make: Callable[[], T]) -> T:
         """The object ``view`` keeps for ``study_id`` between builds (made on first use); past
@@ -105,21 +135,28 @@ class StudyViewCache:
             self._building.pop((*key, version), None)
         done.set_result(body)
 
-    def _refresh(self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes]) -> None:
+    def _refresh(
+        self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes], rest: float
+    ) -> None:
         """Build in the background; no request waits: an error is logged, the stale view stays and
-        the next poll tries again."""
+        the next poll tries again (after the rest)."""
+        started = time.monotonic()
         try:
             body = build()
         except Exception:
             log.exception("building view %s of study %s failed", *key)
             body = None
+        ended = time.monotonic()
         with self._lock:
             if body is not None:
                 self._store(key, version, body)
+            if rest > 0:
+                self._resting[key] = ended + rest * (ended - started)
             self._refreshing.discard(key)
 
     def _store(self, key: tuple[str, str], version: Hashable, body: bytes) -> None:
         self._entries[key] = (version, body)
         self._entries.move_to_end(key)
         while len(self._entries) > self.max_entries:
-            self._entries.popitem(last=False)
+            evicted, _ = self._entries.popitem(last=False)
+            self._resting.pop(evicted, None)

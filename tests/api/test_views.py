@@ -92,3 +92,37 @@ def test_a_view_that_may_lag_builds_one_version_at_a_time_however_many_pass():
 
     assert during == [b"v1"] * 4
     assert builds == [2, 5]  # versions 3 and 4 passed while 2 was building: never built
+
+
+def test_a_resting_view_waits_rest_times_its_build_before_the_next_and_says_it_is_stale():
+    # Identifiability rests 9 times its build: after every batch of quick trials it took two
+    # thirds of a core (benchmarks/README.md, session 5).
+    views, builds = StudyViewCache(), []
+    views.serve("identifiability", "s1", 1, lambda: b"v1", stale_ok=True)
+
+    def build(version: int):
+        def slow() -> bytes:
+            builds.append((version, time.monotonic()))
+            time.sleep(0.2)
+            return f"v{version}".encode()
+        return slow
+
+    def current(version: int, within_s: float = 10.0) -> float:
+        """Ask until the view is of ``version``; when it was."""
+        deadline = time.monotonic() + within_s
+        while not views.serve("identifiability", "s1", version, build(version), True, rest=5.0).current:
+            assert time.monotonic() < deadline, f"version {version} was never built"
+            time.sleep(0.01)
+        return time.monotonic()
+
+    stale = views.serve("identifiability", "s1", 2, build(2), stale_ok=True, rest=5.0)
+    built_2 = current(2)
+    asked_3 = views.serve("identifiability", "s1", 3, build(3), stale_ok=True, rest=5.0)
+    built_3 = current(3)
+
+    assert (stale.body, stale.current) == (b"v1", False)
+    assert (asked_3.body, asked_3.current) == (b"v2", False)
+    assert [version for version, _ in builds] == [2, 3]
+    # The second build started no sooner than 5 x 0.2 s after the first ended.
+    assert builds[1][1] - built_2 >= 5 * 0.2 * 0.9
+    assert built_3 - builds[1][1] >= 0.2

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from optimizer.protocols import StudyStatus
+from dem.result import SimulationResult, SimulationStatus
+from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, trial_id
 from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
 from tests.dashboard.seed import VALIDATED_MEASURED, add_finished_trials, seed_study, seed_validated_study
@@ -142,6 +143,41 @@ def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
     sent = {item["id"] for response in polls for item in response.json()["items"]}
     assert polls, "the page never polled with updated_since"
     assert sent == set(new_ids)
+
+
+VIEWS = re.compile(r"/studies/[^/]+/(recommendation|progress|identifiability)$")
+
+
+def test_new_results_alone_redraw_the_page_without_reading_its_views_again(page, dashboard):
+    # The recommendation, progress and identifiability change only with the study row (a batch
+    # saved): 50 open pages reading them after every result were 3 of their 5 requests a poll.
+    study_id = running_study(dashboard, "views")
+    params = {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.5}
+    spec = TrialSpec(trial_id(study_id, 6, 0), study_id, 6, 1, 0, 6, params, {})
+    dashboard.store.add_trials([spec])
+    read, polls = [], []
+    page.on("request", lambda request: read.append(request.url) if VIEWS.search(request.url) else None)
+    page.on("response", lambda response: polls.append(response) if "updated_since=" in response.url else None)
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function(PLOTTED, arg="pareto-plot")
+    page.wait_for_function("() => document.getElementById('progress-caption').textContent !== ''")
+    first_load = len(read)
+
+    result = SimulationResult(status=SimulationStatus.OK, n_items=30, n_remaining=4, wall_time_s=50, cost=5e7)
+    dashboard.store.record_result(TrialOutcome(spec.trial_id, result))  # a write to the trial only
+    seen = lambda: [i for i, r in enumerate(polls) if spec.trial_id in r.text()]  # noqa: E731
+    while not seen() or len(polls) < seen()[0] + 2:  # the poll that read the result, and one more
+        page.wait_for_timeout(200)
+    after_result = len(read)
+    dashboard.store.save_generation(study_id, 1, b"synthetic", [], None, objectives={})
+    while len(read) < first_load + 3:
+        page.wait_for_timeout(200)
+
+    assert first_load == 3
+    assert after_result == first_load
+    assert sorted(VIEWS.search(url).group(1) for url in read[first_load:first_load + 3]) == [
+        "identifiability", "progress", "recommendation"]
+    assert page.errors == []
 
 
 def test_pause_and_resume_buttons_change_the_study_through_the_api(page, dashboard):

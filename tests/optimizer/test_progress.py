@@ -97,9 +97,9 @@ def test_progress_evaluates_each_record_about_once_however_many_batches(monkeypa
     evaluated = []
     real = optimizer.progress.evaluate
 
-    def counted(group, *args):
+    def counted(group, *args, **options):
         evaluated.append(len(group))
-        return real(group, *args)
+        return real(group, *args, **options)
 
     monkeypatch.setattr(optimizer.progress, "evaluate", counted)
 

@@ -3,7 +3,11 @@
 // down, the recommendation, and the pause/resume/cancel/export buttons. Runs that measured
 // nothing are drawn apart and counted by status in every plot (plots.js failureCounts).
 // Trials are loaded once, then polled incrementally with ?updated_since= (only what changed)
-// and upserted by id, so a running study costs one small request every few seconds.
+// and upserted by id, so a running study costs one small request every few seconds. The
+// recommendation, progress and identifiability are read again only when the study changed
+// (its updated_at, generation or status: their versions), or one alone when its last answer was
+// a stale one (X-Demcal-View: the server builds a new version in the background and serves the
+// old one meanwhile); new trials alone redraw the recommendation's tables from the trials loaded.
 
 import {
   ApiError, PARAMETERS, api, apiKey, clearBanner, el, experimentResponses, fmt, fmtTime, generationText,
@@ -24,7 +28,9 @@ const trials = new Map();
 let study = null;
 let responses = []; // the experiments' responses with units (api.js experimentResponses)
 let cursor = null; // server_time of the last page: the next poll asks only for newer changes
-let recommendationGeneration = -1;
+const VIEWS = ["recommendation", "progress", "identifiability"];
+let viewsRead = null; // the study's version (updated_at, generation, status) the views were read at
+const views = {}; // each view's last answer: { body, current } (current: not a stale version)
 
 // One request for the first page (it says how many match), then the rest in parallel.
 async function loadTrialChanges() {
@@ -176,8 +182,13 @@ const INTRO = {
   "not reproduced": "No candidate reproduced the experiment on fresh seeds (table below); the fastest match of the search:",
 };
 
-async function renderRecommendation() {
-  const body = await api(`${base}/recommendation`);
+// A polled view's JSON, and whether the server said it is of the study's current version.
+async function view(path) {
+  const response = await api(path, { raw: true });
+  return { body: await response.json(), current: response.headers.get("X-Demcal-View") !== "stale" };
+}
+
+function renderRecommendation(body) {
   const box = document.getElementById("recommendation");
   const rec = body.recommendation;
   if (!rec) {
@@ -259,10 +270,7 @@ function renderValidation(rows, measured) {
     el("td", {}, el("span", { class: `status ${VALIDATION_CLASS[row.verdict] || ""}`, text: row.verdict })))));
 }
 
-async function renderProgress() {
-  const [progress, identified] = await Promise.all([
-    api(`${base}/progress`), api(`${base}/identifiability`),
-  ]);
+async function renderProgress(progress, identified) {
   await plotlyReady();
   const figure = progressFigure(progress, study.f1_unit);
   Plotly.react("progress-plot", figure.data, figure.layout, CONFIG);
@@ -340,9 +348,16 @@ async function refresh() {
     changed = await loadTrialChanges();
   }
   if (changed) await renderPlots();
-  if (changed || study.progress.generation !== recommendationGeneration) {
-    await Promise.all([renderRecommendation(), renderProgress()]);
-    recommendationGeneration = study.progress.generation;
+  // Every view when the study changed; otherwise only those last answered with a stale version.
+  const version = `${study.updated_at} ${study.progress.generation} ${study.status}`;
+  const due = VIEWS.filter((name) => version !== viewsRead || !views[name].current);
+  const answers = await Promise.all(due.map((name) => view(`${base}/${name}`)));
+  due.forEach((name, i) => { views[name] = answers[i]; });
+  viewsRead = version;
+  // The recommendation's tables count each set's runs in the trials loaded: redrawn when they change.
+  if (due.includes("recommendation") || changed) renderRecommendation(views.recommendation.body);
+  if (due.includes("progress") || due.includes("identifiability")) {
+    await renderProgress(views.progress.body, views.identifiability.body);
   }
   clearBanner();
   // Keep polling a finished study only until one quiet round has confirmed the last changes.
