@@ -157,7 +157,7 @@ class _Known:
             record = self.records.get(spec.trial_id)
             if record is None:
                 self.merge([TrialRecord(spec, TrialState.QUEUED, attempts=1)])
-            elif record.state in (TrialState.PENDING, TrialState.QUEUED):
+            elif record.state in (TrialState.PENDING, *IN_FLIGHT):  # a lost running one is queued again
                 record.state = TrialState.QUEUED
 
     def recorded(self, outcome: TrialOutcome) -> None:

@@ -98,7 +98,7 @@ class MemoryStore:
         with self._lock:
             for tid in trial_ids:
                 record = self._trials[tid]
-                if record.state is not TrialState.DONE:
+                if record.state not in (TrialState.DONE, TrialState.CANCELLED):  # as the SQL store
                     record.state = TrialState.QUEUED
                     record.attempts += 1
                     self._touch(tid)

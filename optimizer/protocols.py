@@ -147,7 +147,9 @@ class Store(Protocol):
         cursor for the next call. A trial may come back again; the caller upserts by id."""
 
     def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
-        """Queued trials; ``message`` says why they may wait (e.g. no worker has their engine)."""
+        """Trials handed to the executor, pending or sent again after it lost them (queued or
+        running before): now queued, one more attempt; ``message`` says why they may wait (e.g.
+        no worker has their engine). Done and cancelled trials stay as they are."""
 
     def mark_running(self, trial_id: str, worker: str | None = None) -> None: ...
 

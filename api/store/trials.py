@@ -1,4 +1,4 @@
-"""Trials in the SQL store as the driver writes them: added, queued, running, requeued, recorded.
+"""Trials in the SQL store as the driver writes them: added, queued (again, when lost), running, recorded.
 
 ``record_result`` is a conditional UPDATE (``... WHERE state not in (done, cancelled)``), so the
 database, not a read-then-write in Python, decides which of two racing results wins.
@@ -84,9 +84,12 @@ class TrialStore(StoreBase):
             return [trial_record(row) for row in rows], max((row.updated_at for row in rows), default=since)
 
     def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
-        """Queued; ``message`` says why they may wait (no worker has their engine yet)."""
+        """Queued: the driver handed them to the executor, the first time or again (a trial it
+        finds running but unknown to the executor was lost with a restarted process or a flushed
+        queue, and waits for a worker again); ``message`` says why they may wait (no worker has
+        their engine yet)."""
         self._move(
-            trial_ids, (TrialState.PENDING, TrialState.QUEUED),
+            trial_ids, (TrialState.PENDING, TrialState.QUEUED, TrialState.RUNNING),
             state=TrialState.QUEUED.value, attempts=TrialRow.attempts + 1, message=message,
         )
 
@@ -96,10 +99,6 @@ class TrialStore(StoreBase):
             [trial_id], (TrialState.PENDING, TrialState.QUEUED),
             state=TrialState.RUNNING.value, worker=worker, started_at=utcnow(), message="",
         )
-
-    def requeue(self, trial_ids: Sequence[str]) -> None:
-        """Send trials lost in flight (queued or running, unknown to the executor) back to pending."""
-        self._move(trial_ids, (TrialState.QUEUED, TrialState.RUNNING), state=TrialState.PENDING.value)
 
     def _move(self, trial_ids: Sequence[str], from_states: Sequence[TrialState], **values) -> None:
         """The trials among ``trial_ids`` in one of ``from_states`` get ``values``: the database

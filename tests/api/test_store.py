@@ -160,18 +160,33 @@ def test_driver_runs_a_whole_study_on_the_sql_store(store):
     assert store.best_trial(study_id) is not None
 
 
-def test_queue_bookkeeping_counts_attempts_and_requeues_lost_trials(store):
+def test_queue_bookkeeping_counts_attempts(store):
     study_id = store.create_study(_definition(), owner=None)
     spec = _specs(study_id, 1)[0]
     store.add_trials([spec])
 
     store.mark_queued([spec.trial_id])
     store.mark_running(spec.trial_id, worker="w1")
-    store.requeue([spec.trial_id])
     store.mark_queued([spec.trial_id])
 
     record = store.trials(study_id)[0]
     assert (record.state, record.attempts, record.worker) == (TrialState.QUEUED, 2, "w1")
+
+
+def test_a_running_trial_the_executor_lost_shows_queued_once_sent_again(store):
+    # A restarted server's executor knows nothing of the trial a worker was running: the driver
+    # sends it again, and until a worker takes it, it is queued, not "running" on nobody.
+    study_id = store.create_study(_definition(), owner=None)
+    Driver(store, SyntheticExecutor(per_poll=0)).step(study_id, timeout=0)
+    running = store.trials(study_id)[0].spec.trial_id
+    store.mark_running(running, worker="w1")
+
+    restarted = SyntheticExecutor(per_poll=0)
+    Driver(store, restarted).step(study_id, timeout=0)
+
+    record = next(r for r in store.trials(study_id) if r.spec.trial_id == running)
+    assert running in restarted.in_flight()
+    assert (record.state, record.attempts) == (TrialState.QUEUED, 2)
 
 
 def test_a_result_after_the_executors_retries_counts_them_as_attempts(store):
