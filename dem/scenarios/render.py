@@ -264,7 +264,9 @@ def draw_frame(run: Run, frame: Frame, axes_top, axes_side) -> None:
     for axis in (axes_side.xaxis, axes_side.yaxis, axes_side.zaxis):
         axis.pane.set_visible(False)
     axes_side.set_xlabel("x (m)", fontsize=7, labelpad=-4)
-    axes_side.set_zlabel("z (m)", fontsize=7, labelpad=-4)
+    axes_side.set_zlabel("z (m)", fontsize=7, labelpad=-7)
+    axes_side.zaxis.set_label_position("upper")  # beside its tick labels, at the right
+    axes_side.zaxis.set_ticks_position("upper")
     _annotate_motion(run, axes_side, lo, hi)
     in_tray = int(np.sum(frame.state == IN_TRAY))
     axes_top.set_title(f"t = {frame.t:.2f} s   items in the tray: {in_tray}", fontsize=9)
@@ -301,7 +303,11 @@ def _figure(columns: int, width: float, height: float):
     import matplotlib.pyplot as plt
 
     fig = plt.figure(figsize=(width * columns, height))
-    grid = fig.add_gridspec(2, columns, height_ratios=[1.0, 1.1], left=0.1, right=0.97, top=0.95, bottom=0.06)
+    # The oblique view's z tick labels and label stand out right of its axes (zoomed box): a right
+    # margin of an inch and the space between columns leave room for them.
+    right = 1.0 - 1.0 / (width * columns)
+    grid = fig.add_gridspec(2, columns, height_ratios=[1.0, 1.1], left=0.08, right=right, top=0.95,
+                            bottom=0.06, wspace=0.45)
     pairs = [
         (fig.add_subplot(grid[0, col]), fig.add_subplot(grid[1, col], projection="3d"))
         for col in range(columns)

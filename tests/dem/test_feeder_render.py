@@ -76,6 +76,17 @@ def test_png_marks_the_retained_item_in_red(two_item_run):
     assert np.any(np.abs(pixels - red).sum(axis=1) < 60)
 
 
+@pytest.mark.parametrize("columns", [1, 3])
+def test_png_draws_nothing_at_its_right_edge_where_the_oblique_views_z_labels_were_cut(two_item_run, columns):
+    # docs/clogged-run.png cut the last column's z tick labels ("0.2" showed as "0.") at the edge.
+    run = load_run(two_item_run)
+
+    path = render_png(run, list(np.linspace(0.0, 1.0, columns)), two_item_run / "run.png")
+
+    pixels = np.asarray(Image.open(path).convert("L")).astype(int)
+    assert pixels[:, -6:].min() >= 250, "something is drawn across the right edge of the picture"
+
+
 def _near(pixels: np.ndarray, colour: str) -> np.ndarray:
     rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)])
     return np.abs(pixels.reshape(-1, 3).astype(int) - rgb).sum(axis=1) < 40
