@@ -4,8 +4,10 @@ For every listed pair the geometry (overlap, normal, contact point) is computed 
 force comes from ``dem.contact.sphere_contact_force``; this module applies the law's rules that
 involve more than one sphere contact:
 
-* the resolution rule: a body pair's (or a body's and a facet's) stiffness is shared among its
-  simultaneous sphere contacts with weights ``share_weight(delta) / sum`` (``dem/contact.py``);
+* the resolution rule: a body pair (or a body and a facet) with several simultaneous sphere
+  contacts is one spring-dashpot in the Lehmer mean M of their overlaps, and each contact carries
+  its share ``dM/d(delta_k)`` of the pair's force (``dem/contact.py``): the first pass over the
+  contacts sums their ``share_sums`` per group, the second applies the forces;
 * the facet rule of ``dem/walls.py``: an edge or vertex contact is dropped when its contact
   point also lies on another touched facet of the same wall that is at least as close.
 
@@ -34,7 +36,16 @@ import math
 import numba
 
 from dem.conf import JIT_FLAGS
-from dem.contact import PairLaw, patch_damping, share_weight, sphere_contact_force
+from dem.contact import (
+    N_SUMS,
+    PairLaw,
+    contact_share,
+    pair_normal_force,
+    patch_damping,
+    share_sums,
+    shared_overlap,
+    sphere_contact_force,
+)
 from dem.convex import place
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
@@ -93,6 +104,47 @@ def _twist(torque, b, tx, ty, tz):
 
 
 @numba.njit(**JIT_FLAGS)
+def _approach_rate(bodies, ba, bb, point, n):
+    """d(delta)/dt of a contact at ``point`` (3-tuple) with normal n (3-tuple, b -> a) between
+    bodies ba and bb: minus their relative velocity there along n."""
+    pos, vel, omega = bodies.pos, bodies.vel, bodies.omega
+    cx, cy, cz = point[0], point[1], point[2]
+    vax, vay, vaz = _point_velocity(vel, omega, ba, cx - pos[ba, 0], cy - pos[ba, 1], cz - pos[ba, 2])
+    vbx, vby, vbz = _point_velocity(vel, omega, bb, cx - pos[bb, 0], cy - pos[bb, 1], cz - pos[bb, 2])
+    return -((vax - vbx) * n[0] + (vay - vby) * n[1] + (vaz - vbz) * n[2])
+
+
+@numba.njit(**JIT_FLAGS)
+def _add_sums(sums, g, delta, rate):
+    """Adds one touching contact (overlap ``delta``, ``rate`` = d(delta)/dt) to row g of a
+    group's sums (``N_SUMS`` columns)."""
+    a, b, c, d, e = share_sums(delta, rate)
+    sums[g, 0] += a
+    sums[g, 1] += b
+    sums[g, 2] += c
+    sums[g, 3] += d
+    sums[g, 4] += e
+    sums[g, 5] += 1.0
+
+
+@numba.njit(**JIT_FLAGS)
+def _contact_normal_force(sums, g, single, delta, v, n, law):
+    """(f_n, N, w) of one contact of group g: its normal force, its pair's net normal force (the Coulomb
+    cap's) and its share of the tangential law. A contact alone in its group (``single``, or the only one
+    touching) carries the whole law, ``K delta + C d(delta)/dt``; otherwise the pair is one spring-dashpot
+    in the mean overlap of ``dem.contact.shared_overlap`` and the contact takes its ``contact_share``.
+    ``v`` (3-tuple) is the first partner's velocity relative to the second along n (3-tuple)."""
+    if single or sums[g, 5] == 1.0:
+        rate = -(v[0] * n[0] + v[1] * n[1] + v[2] * n[2])
+        f = pair_normal_force(delta, rate, law.k_n, law.c_n)
+        return f, f, 1.0
+    m, m_rate, net = shared_overlap((sums[g, 0], sums[g, 1], sums[g, 2], sums[g, 3], sums[g, 4]))
+    f = pair_normal_force(m, m_rate, law.k_n, law.c_n)
+    share, weight = contact_share(delta, m, sums[g, 1])
+    return f * share, f * max(net, 0.0), weight
+
+
+@numba.njit(**JIT_FLAGS)
 def body_pair_laws(pairs, sbody, bodies, material):
     """Each body pair's contact-law constants (``G_*`` columns of ``pairs.group_law``) for the
     pairs just built: K = series(E_a D_a, E_b D_b), C = 2 zeta sqrt(K m*), zeta, mu and K_t / K_n
@@ -142,11 +194,12 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
     """Sphere-sphere contacts. Returns (contacts carrying force, offending body or -1).
 
     A body pair with one listed sphere pair (two plain spheres: every pair of a sphere packing)
-    carries its whole law (weight ``share_weight(delta) / share_weight(delta)`` = 1), so its force
-    is applied in the first pass over the list. The others need their group's overlap sum first:
-    the first pass keeps their geometry and the sum, the second applies their forces (skipped
-    when there are none). One pass over the list per step is what keeps a large packing's cost
-    per pair flat once its lists no longer fit the cache. ``delta`` is kept for every pair (-1
+    carries its whole law, so its force is applied in the first pass over the list. The others
+    need their group's sums first: the first pass keeps their geometry and adds their
+    ``share_sums`` (and count) to the group's, the second applies their forces (skipped when
+    there are none); a group with one touching contact carries the whole law there too. One pass
+    over the list per step is what keeps a large packing's cost per pair flat once its lists no
+    longer fit the cache. ``delta`` is kept for every pair (-1
     when apart): ``Simulation.current_overlap`` reads it.
     """
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
@@ -170,7 +223,8 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         first = p == 0 or pp_group[p - 1] != g
         single = first and (p == n_pp - 1 or pp_group[p + 1] != g)
         if first and not single:
-            grp_sum[g] = 0.0
+            for k in range(N_SUMS):
+                grp_sum[g, k] = 0.0
         pp_delta[p] = -1.0
         if not (active[sbody[i]] and active[sbody[j]]):
             continue
@@ -201,8 +255,10 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
             pairs.point[p, 2] = cz + shift * nz
             pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2] = s_uu, s_uw, s_ww
             if single:
-                grp_sum[g] = 0.0
-            grp_sum[g] += share_weight(delta)
+                for k in range(N_SUMS):
+                    grp_sum[g, k] = 0.0
+            rate = _approach_rate(bodies, sbody[i], sbody[j], pairs.point[p], (nx, ny, nz))
+            _add_sums(grp_sum, g, delta, rate)
             n_deferred += 1
             continue
         d = math.sqrt(d2)
@@ -212,11 +268,13 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         nx, ny, nz = dx / d, dy / d, dz / d
         pp_delta[p] = delta
         if single:
-            _sphere_pair_force(p, g, (i, j), (nx, ny, nz), delta, 1.0, bodies, spheres, pairs, hist_dt)
+            _sphere_pair_force(p, g, (i, j), (nx, ny, nz), delta, bodies, spheres, pairs, hist_dt)
             n_contacts += 1
             continue
         pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = nx, ny, nz
-        grp_sum[g] += share_weight(delta)
+        reach = radius[j] - 0.5 * delta
+        point = (x[j, 0] + nx * reach, x[j, 1] + ny * reach, x[j, 2] + nz * reach)
+        _add_sums(grp_sum, g, delta, _approach_rate(bodies, sbody[i], sbody[j], point, (nx, ny, nz)))
         n_deferred += 1
     if n_deferred == 0:
         return n_contacts, -1
@@ -231,9 +289,8 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         if single and not rounded:
             continue  # done in the first pass
         nx, ny, nz = pp_n[p, 0], pp_n[p, 1], pp_n[p, 2]
-        weight = share_weight(delta) / grp_sum[g]
         if not rounded:
-            _sphere_pair_force(p, g, (i, j), (nx, ny, nz), delta, weight, bodies, spheres, pairs, hist_dt)
+            _sphere_pair_force(p, g, (i, j), (nx, ny, nz), delta, bodies, spheres, pairs, hist_dt)
             n_contacts += 1
             continue
         ba, bb = sbody[i], sbody[j]
@@ -243,15 +300,15 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         vax, vay, vaz = _point_velocity(vel, omega, ba, rax, ray, raz)
         vbx, vby, vbz = _point_velocity(vel, omega, bb, rbx, rby, rbz)
         law = _group_law(grp_law, g)
-        fx, fy, fz, f_n = sphere_contact_force(
-            (nx, ny, nz), delta, (vax - vbx, vay - vby, vaz - vbz), weight, law, pp_hist, p, hist_dt
-        )
+        v = (vax - vbx, vay - vby, vaz - vbz)
+        f_n, f_pair, weight = _contact_normal_force(grp_sum, g, single, delta, v, (nx, ny, nz), law)
+        fx, fy, fz = sphere_contact_force((nx, ny, nz), f_n, f_pair, v, weight, law, pp_hist, p, hist_dt)
         _push(force, torque, ba, fx, fy, fz, rax, ray, raz)
         _push(force, torque, bb, -fx, -fy, -fz, rbx, rby, rbz)
         moment = (pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2])
         spin = (omega[ba, 0] - omega[bb, 0], omega[ba, 1] - omega[bb, 1], omega[ba, 2] - omega[bb, 2])
         tx, ty, tz = patch_damping(
-            (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * f_n
+            (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * weight * f_pair
         )
         _twist(torque, ba, tx, ty, tz)
         _twist(torque, bb, -tx, -ty, -tz)
@@ -260,11 +317,12 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _sphere_pair_force(p, g, rows, n, delta, weight, bodies, spheres, pairs, hist_dt):
+def _sphere_pair_force(p, g, rows, n, delta, bodies, spheres, pairs, hist_dt):
     """Applies the force of listed pair p, two plain spheres (``rows`` i and j) of group g
-    touching with overlap ``delta`` along n (3-tuple, j -> i) and ``weight`` of their body pair's
-    law, at the middle of the overlap. Inlined: its three containers would cost more to pass than
-    the force itself."""
+    touching with overlap ``delta`` along n (3-tuple, j -> i), at the middle of the overlap: the
+    group's whole law if p is its only listed pair, else p's share of it (``pairs.group_sum``
+    holds the group's sums). Inlined: its three containers would cost more to pass than the force
+    itself."""
     i, j = rows
     nx, ny, nz = n
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
@@ -277,9 +335,11 @@ def _sphere_pair_force(p, g, rows, n, delta, weight, bodies, spheres, pairs, his
     vax, vay, vaz = _point_velocity(vel, omega, ba, rax, ray, raz)
     vbx, vby, vbz = _point_velocity(vel, omega, bb, rbx, rby, rbz)
     law = _group_law(pairs.group_law, g)
-    fx, fy, fz, _ = sphere_contact_force(
-        (nx, ny, nz), delta, (vax - vbx, vay - vby, vaz - vbz), weight, law, pairs.hist, p, hist_dt
-    )
+    v = (vax - vbx, vay - vby, vaz - vbz)
+    count = pairs.count[N_PAIRS]
+    single = (p == 0 or pairs.group[p - 1] != g) and (p == count - 1 or pairs.group[p + 1] != g)
+    f_n, f_pair, weight = _contact_normal_force(pairs.group_sum, g, single, delta, v, n, law)
+    fx, fy, fz = sphere_contact_force(n, f_n, f_pair, v, weight, law, pairs.hist, p, hist_dt)
     _push(force, torque, ba, fx, fy, fz, rax, ray, raz)
     _push(force, torque, bb, -fx, -fy, -fz, rbx, rby, rbz)
 
@@ -307,6 +367,19 @@ def _crown(spheres, i):
     """Sphere row i's crown as a 3-tuple (``dem/crown.py``)."""
     c = spheres.crown
     return c[i, 0], c[i, 1], c[i, 2]
+
+
+@numba.njit(**JIT_FLAGS)
+def _wall_approach_rate(bodies, b, wall_v, point, delta, n):
+    """d(delta)/dt of body b's wall contact of overlap ``delta`` and normal n (3-tuple, facet ->
+    body) whose facet point is ``point`` (row of ``wall_pairs.point``; the force acts half the
+    overlap inside, as in ``_wall_forces``), against a wall moving with ``wall_v``."""
+    pos = bodies.pos
+    cx = point[0] - 0.5 * delta * n[0]
+    cy = point[1] - 0.5 * delta * n[1]
+    cz = point[2] - 0.5 * delta * n[2]
+    vx, vy, vz = _point_velocity(bodies.vel, bodies.omega, b, cx - pos[b, 0], cy - pos[b, 1], cz - pos[b, 2])
+    return -((vx - wall_v[0]) * n[0] + (vy - wall_v[1]) * n[1] + (vz - wall_v[2]) * n[2])
 
 
 @numba.njit(**JIT_FLAGS)
@@ -433,10 +506,14 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
         while q_end < n_wp and sbody[wp_i[q_end]] == b:
             q_end += 1
         for a in range(p, q_end):
-            facet_sum[wp_f[a]] = 0.0
+            for k in range(N_SUMS):
+                facet_sum[wp_f[a], k] = 0.0
         for a in range(p, q_end):
             if wp_keep[a]:
-                facet_sum[wp_f[a]] += share_weight(wp_delta[a])
+                nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
+                w_v = wall_vel[f_wall[wp_f[a]]]
+                rate = _wall_approach_rate(bodies, b, w_v, wp_cp[a], wp_delta[a], (nx, ny, nz))
+                _add_sums(facet_sum, wp_f[a], wp_delta[a], rate)
         # The law's constants depend on the body and the wall only: computed once per run of
         # contacts with the same wall.
         law_wall = -1
@@ -459,14 +536,14 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
             rax, ray, raz = cx - pos[b, 0], cy - pos[b, 1], cz - pos[b, 2]
             vbx, vby, vbz = _point_velocity(vel, omega, b, rax, ray, raz)
             v = (vbx - wall_vel[w, 0], vby - wall_vel[w, 1], vbz - wall_vel[w, 2])
-            weight = share_weight(delta) / facet_sum[f]
-            fx, fy, fz, f_n = sphere_contact_force((nx, ny, nz), delta, v, weight, law, wp_hist, a, hist_dt)
+            f_n, f_pair, weight = _contact_normal_force(facet_sum, f, False, delta, v, (nx, ny, nz), law)
+            fx, fy, fz = sphere_contact_force((nx, ny, nz), f_n, f_pair, v, weight, law, wp_hist, a, hist_dt)
             _push(force, torque, b, fx, fy, fz, rax, ray, raz)
             if spheres.core_count[wp_i[a]] > 0:
                 moment = (wall_pairs.moment[a, 0], wall_pairs.moment[a, 1], wall_pairs.moment[a, 2])
                 spin = (omega[b, 0], omega[b, 1], omega[b, 2])
                 tx, ty, tz = patch_damping(
-                    (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * f_n
+                    (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * weight * f_pair
                 )
                 _twist(torque, b, tx, ty, tz)
             n_contacts += 1

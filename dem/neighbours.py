@@ -27,6 +27,7 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
+from dem.contact import N_SUMS
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 
 # Layout of a list's ``count``: pairs in use, groups in use (sphere pairs), room needed after a
@@ -65,7 +66,7 @@ class SpherePairs(NamedTuple):
     new_hist: np.ndarray  # (capacity, 3)
     delta: np.ndarray  # (capacity,) scratch of the force pass: overlap, -1 when apart
     normal: np.ndarray  # (capacity, 3) scratch of the force pass: unit normal j -> i
-    group_sum: np.ndarray  # (capacity,) scratch of the force pass: the group's overlap sum
+    group_sum: np.ndarray  # (capacity, 5) scratch of the force pass: the group's sums (contact.N_SUMS)
     group_law: np.ndarray  # (capacity, 5) the group's contact-law constants, G_* columns
     axis: np.ndarray  # (capacity, 3) rounded pieces: cached separating direction (any is valid)
     point: np.ndarray  # (capacity, 3) scratch of the force pass: a piece pair's contact point
@@ -165,7 +166,7 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
         np.zeros((capacity, 3)),
         np.zeros(capacity),
         np.zeros((capacity, 3)),
-        np.zeros(capacity),
+        np.zeros((capacity, N_SUMS)),
         np.zeros((capacity, 5)),
         np.zeros((capacity, 3)),
         np.zeros((capacity, 3)),

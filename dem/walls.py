@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from dem.contact import ContactParams
+from dem.contact import N_SUMS, ContactParams
 from dem.facets import Facets, build_facets
 from dem.frames import dot, norm
 from dem.motion import MOTION_ROW, Motion, motion_row
@@ -153,7 +153,7 @@ class Walls(NamedTuple):
     vel: np.ndarray  # (n, 3) velocity at the current time, written by the run loop
     material: np.ndarray  # (n,) int64 index into the simulation's MaterialTable
     facets: Facets
-    facet_sum: np.ndarray  # (n_facets,) scratch of the force pass: one body's overlap sum per facet
+    facet_sum: np.ndarray  # (n_facets, N_SUMS) scratch of the force pass: one body's sums per facet
 
 
 def wall_arrays(walls: list[WallMesh], material_index) -> Walls:
@@ -166,4 +166,5 @@ def wall_arrays(walls: list[WallMesh], material_index) -> Walls:
         motion[k] = motion_row(wall.motion)
         material[k] = material_index(wall.material)
     facets = build_facets(walls)
-    return Walls(motion, np.zeros((n, 3)), np.zeros((n, 3)), material, facets, np.zeros(max(facets.n, 1)))
+    facet_sum = np.zeros((max(facets.n, 1), N_SUMS))
+    return Walls(motion, np.zeros((n, 3)), np.zeros((n, 3)), material, facets, facet_sum)
