@@ -45,6 +45,7 @@ from worker.local import LocalPoolExecutor  # noqa: E402
 
 README = ROOT / "README.md"
 QUICK_STUDY = ROOT / "examples" / "study-quick.toml"
+WALL_STUDY = ROOT / "examples" / "study-wall.toml"  # the quick study's experiment, walls searched apart
 QUICK_FEEDER = ROOT / "examples" / "feeder-quick.toml"
 PICTURE = ROOT / "docs" / "clogged-run.png"
 NEW_STUDY_FORM = ROOT / "api" / "dashboard" / "static" / "new.js"  # starts from the quick study
@@ -104,9 +105,10 @@ def stale(figures: dict) -> list[str]:
     if claim not in readme:
         found = re.search(r"measured N_t = [\d, ]+ on \d+ seeds", readme)
         problems.append(f"README.md says {found.group(0) if found else 'no measured list'}; now {claim}")
-    example = tomllib.loads(QUICK_STUDY.read_text())["experiment"]["measured"]
-    if example != measured:
-        problems.append(f"examples/study-quick.toml has measured = {example}; now {measured}")
+    for study in (QUICK_STUDY, WALL_STUDY):
+        example = tomllib.loads(study.read_text())["experiment"]["measured"]
+        if example != measured:
+            problems.append(f"examples/{study.name} has measured = {example}; now {measured}")
     starter = re.search(r"measured = \[([\d, ]*)\]", NEW_STUDY_FORM.read_text())
     if starter is None or starter.group(1) != listed:
         problems.append(f"the new-study form's starter (new.js) is not measured = [{listed}]")
