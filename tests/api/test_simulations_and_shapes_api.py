@@ -42,7 +42,7 @@ def test_simulation_is_queued_as_pending_and_shows_its_result(client, keys, stor
     ("params", "expected"),
     [
         ({"E": 1e7, "nu": 0.6, "e": 0.5, "mu": 0.4}, "nu = 0.6 is outside"),
-        ({"E": 1e7, "nu": 0.3, "e": 0.5}, "missing: ['mu']"),
+        ({"E": 1e7, "nu": 0.3, "e": 0.5}, "give E, nu, e and mu (missing: mu)"),
         ({"E": -1.0, "nu": 0.3, "e": 0.5, "mu": 0.4}, "E = -1.0"),
     ],
 )
