@@ -19,6 +19,7 @@ from dem.polyhedra import Polyhedron, make_polyhedron
 from dem.quaternion import from_axis_angle, matrix
 from dem.simulation import Simulation
 from dem.walls import WallMesh
+from tests.dem.collisions import assert_collision_conserves_energy_and_momenta
 
 G = 9.81
 SIZE = (0.04, 0.03, 0.01)
@@ -95,14 +96,6 @@ def test_rounded_box_on_incline_above_friction_angle_slides_with_coulomb_acceler
     assert measured == pytest.approx(G * (math.sin(angle) - mu * math.cos(angle)), rel=0.03)
 
 
-def momenta(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
-    """Total linear momentum and angular momentum about the origin."""
-    b = sim.bodies
-    linear = (b.mass[:, None] * b.vel).sum(axis=0)
-    angular = (np.cross(b.pos, b.mass[:, None] * b.vel) + b.angmom).sum(axis=0)
-    return linear, angular
-
-
 ORIENTATIONS = {
     # face-on with the faces offset (the case a clump with staggered rows fails)
     "face-on": ((1.0, 0.0, 0.0), 0.0, (0.0, 0.004, 0.003)),
@@ -119,22 +112,6 @@ def elastic_sim() -> Simulation:
         domain_min=(-1, -1, -1),
         domain_max=(1, 1, 1),
     )
-
-
-def assert_collision_conserves_energy_and_momenta(sim: Simulation) -> None:
-    """Runs sim until its bodies have met and parted: kinetic energy within 0.5 % (issue 12),
-    linear and angular momentum to 1e-10 relative."""
-    e0 = sim.kinetic_energy()
-    p0, l0 = momenta(sim)
-
-    report = sim.run(0.15)
-
-    assert report.ok, report.message
-    assert sim.n_contacts == 0, "the bodies must have separated"
-    assert sim.kinetic_energy() == pytest.approx(e0, rel=0.005)
-    p1, l1 = momenta(sim)
-    assert np.abs(p1 - p0).max() <= 1e-10 * np.abs(sim.bodies.mass[:, None] * sim.bodies.vel).sum()
-    assert np.abs(l1 - l0).max() <= 1e-10 * max(np.linalg.norm(l0), 1e-12)
 
 
 @pytest.mark.parametrize("case", list(ORIENTATIONS))
