@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from dem.parameters import ALL_PARAMETER_NAMES, PARAMETER_NAMES
+from dem.parameters import ALL_PARAMETER_NAMES, PARAMETER_NAMES, WALL_PARAMETER_NAMES
 from dem.scenarios.registry import ScenarioConfig
 from optimizer.protocols import StudyStatus, TrialState
 
@@ -322,7 +322,8 @@ class SimulationCreate(BaseModel):
         description="A scenario configuration; its kind (default feeder) picks it from the registry.",
     )
     params: dict[str, float] = Field(
-        description="E (Pa), nu, e, mu; optionally E_wall (Pa), e_wall, mu_wall (the item-wall pair).",
+        description=f"{', '.join(PARAMETER_NAMES)}; optionally {', '.join(WALL_PARAMETER_NAMES)} "
+        "(the walls' material and the item-wall pair). Moduli in Pa.",
         json_schema_extra={
             "properties": {name: {"type": "number"} for name in ALL_PARAMETER_NAMES},
             "required": list(PARAMETER_NAMES),

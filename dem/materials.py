@@ -22,8 +22,8 @@ The pair rule (each fact of it lives here once):
 
 ``MaterialTable`` numbers the distinct materials of a simulation and holds every pair's
 ``(zeta, mu, K_t/K_n)`` as arrays for the kernels. ``TrialMaterials`` turns a trial's parameters
-(the items' E, nu, e, mu and the optional E_wall, e_wall, mu_wall of ``dem/parameters.py``) into
-the items' material, the walls' and their explicit pair. This module computes no forces.
+(the items' four and the optional item-wall ones of ``dem/parameters.py``) into the items'
+material, the walls' and their explicit pair. This module computes no forces.
 """
 
 from __future__ import annotations
@@ -167,10 +167,11 @@ class MaterialTable:
 @dataclass(frozen=True)
 class TrialMaterials:
     """The materials of a scenario's run from its parameters: the items', and the walls' with the
-    item-wall pair when a trial names E_wall, e_wall or mu_wall.
+    item-wall pair when a trial names any item-wall parameter (``WALL_PARAMETER_NAMES``).
 
-    A wall of material ``walls`` has E = E_wall (default: the items' E; the stiffness is the two
-    E in series, ``dem.contact.wall_stiffness``) and the items' nu; the pair (items, walls) has
+    A wall of material ``walls`` has E = E_wall and nu = nu_wall (default: the items' E and nu;
+    the normal stiffness is the two E in series, ``dem.contact.wall_stiffness``, the tangential
+    one Mindlin's ratio of both materials, ``pair_tangential_ratio``); the pair (items, walls) has
     e = e_wall and mu = mu_wall (default: the items' e and mu). Without any of them ``walls`` is
     None: the walls take the items' material, as every run did before these parameters existed,
     and the run is the same to the last bit.
@@ -191,6 +192,7 @@ class TrialMaterials:
         if not given:
             return cls(items)
         items = Material.of(items, cls.ITEMS)
-        walls = Material(E=given.get("E_wall", items.E), nu=items.nu, e=items.e, mu=items.mu, name=wall)
+        E, nu = given.get("E_wall", items.E), given.get("nu_wall", items.nu)
+        walls = Material(E=E, nu=nu, e=items.e, mu=items.mu, name=wall)
         pair = Interaction(e=given.get("e_wall", items.e), mu=given.get("mu_wall", items.mu))
         return cls(items, walls, {(cls.ITEMS, wall): pair})

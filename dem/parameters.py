@@ -1,10 +1,11 @@
 """The contact parameters a calibration can search and their physical ranges.
 
 The four of the paper's eq. 1-2 (E, nu, e, mu) are the items' material: every trial carries them.
-The item-wall ones (E_wall, e_wall, mu_wall) are optional: a wall's Young's modulus and the e and
-mu of the item-wall pair (``dem/materials.py``: e and mu belong to a pair, stiffness comes from
-both E in series). A trial that does not name one gets the item value it stands for
-(``item_parameter``), so a study without them runs exactly as before they existed.
+The item-wall ones (E_wall, nu_wall, e_wall, mu_wall) are optional: a wall's Young's modulus and
+Poisson's ratio, and the e and mu of the item-wall pair (``dem/materials.py``: e and mu belong to a
+pair, normal stiffness comes from both E in series, tangential stiffness from both E and nu). A
+trial that does not name one gets the item value it stands for (``item_parameter``), so a study
+without them runs exactly as before they existed.
 
 The one home of these facts: the contact law, the scenarios' configs, the optimiser's study
 definition, the API and the CLI all read them from here. Plain Python (no numba), so that the
@@ -16,12 +17,12 @@ from __future__ import annotations
 import math
 
 PARAMETER_NAMES = ("E", "nu", "e", "mu")
-WALL_PARAMETER_NAMES = ("E_wall", "e_wall", "mu_wall")
+WALL_PARAMETER_NAMES = ("E_wall", "nu_wall", "e_wall", "mu_wall")
 ALL_PARAMETER_NAMES = PARAMETER_NAMES + WALL_PARAMETER_NAMES  # the canonical order (the GA's genes)
 PARAMETER_MEANINGS = {
     "E": "Young's modulus, Pa", "nu": "Poisson's ratio", "e": "restitution", "mu": "friction",
-    "E_wall": "the walls' Young's modulus, Pa", "e_wall": "item-wall restitution",
-    "mu_wall": "item-wall friction",
+    "E_wall": "the walls' Young's modulus, Pa", "nu_wall": "the walls' Poisson's ratio",
+    "e_wall": "item-wall restitution", "mu_wall": "item-wall friction",
 }
 # name: (low, high, low inclusive, high inclusive): E > 0, -1 < nu < 0.5, 0 < e <= 1, mu >= 0;
 # a wall parameter has the range of the item parameter it stands for.

@@ -100,6 +100,10 @@ class Parameters(_Strict):
         None, description="The walls' Young's modulus, Pa (the feeder's tray, the heap's floor); "
         "omitted: the items' E.",
     )
+    nu_wall: ParameterRange | None = Field(
+        None, description="The walls' Poisson's ratio (the item-wall pair's tangential stiffness); "
+        "omitted: the items' nu.",
+    )
     e_wall: ParameterRange | None = Field(
         None, description="Restitution of an item against the walls; omitted: the items' e."
     )

@@ -402,7 +402,8 @@ def _validation_table(console, summary: dict) -> None:
     table = Table(
         title=f"Validation on fresh seeds (experiment: median {_median(measured):g}, {response} {measured})"
     )
-    names = [name for name in rows[0]["params"] if name != "nu"]  # nu hardly matters: kept narrow
+    # nu and nu_wall hardly matter: kept narrow
+    names = [name for name in rows[0]["params"] if item_parameter(name) != "nu"]
     for column in ("individual", *(_parameter_header(name) for name in names), "search f1",
                    f"fresh {response}", "median [90 %]", "W1", "f1 [90 %]", "verdict"):  # fmt: skip
         table.add_column(column, justify="right")

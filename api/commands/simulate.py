@@ -31,8 +31,8 @@ def _parse_value(text: str):
 
 
 def split_sets(sets: list[str]) -> tuple[dict[str, float], dict[str, object]]:
-    """``--set`` options as contact parameters (E, nu, e, mu, E_wall, e_wall, mu_wall) and dotted
-    config overrides."""
+    """``--set`` options as contact parameters (``ALL_PARAMETER_NAMES``) and dotted config
+    overrides."""
     params: dict[str, float] = {}
     overrides: dict[str, object] = {}
     for item in sets:

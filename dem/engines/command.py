@@ -13,8 +13,9 @@ A study selects it with ``engine = "command"`` and ``[engine_options]``::
     # patterns = { angle_deg = "angle of repose: ([-0-9.eE+]+)" }
 
 The template and every command argument are rendered with Python's ``string.Template``:
-``$E $nu $e $mu`` (the trial's parameters; ``$E_wall $e_wall $mu_wall`` too when the study or the
-scenario's ``[params]`` names them), ``$seed``, ``$input`` (the input file's name),
+``$E $nu $e $mu`` (the trial's parameters; the item-wall ones of ``dem/parameters.py``,
+``$E_wall`` ..., too when the study or the scenario's ``[params]`` names them), ``$seed``,
+``$input`` (the input file's name),
 ``$config_json`` (the scenario's whole config as JSON) and every config value by its dotted key
 with underscores (``$particles_count``, ``$cylinder_lift_speed``). The program runs in a fresh
 temporary folder with the deadline and stop requests of any run; a non-zero exit, a missing

@@ -19,7 +19,7 @@ forces (``dem/contact.py`` is the reference):
 * ``coefficientFriction`` = mu for every pair; Coulomb's cap acts on the tangential spring as in
   ours (``tangential history``); no rolling friction in either engine.
 
-The walls are of the items' material: a study or run naming E_wall, e_wall or mu_wall is refused
+The walls are of the items' material: a study or run naming an item-wall parameter is refused
 (``parameters``), since plate and cylinder share one atom type here while the built-in engine
 gives the floor alone the item-wall material.
 

@@ -73,6 +73,7 @@ class ParamsConfig(Section):
     e: float = Field(0.5, description="Restitution coefficient.")
     mu: float = Field(0.5, description="Friction coefficient.")
     E_wall: float | None = Field(None, description="The walls' Young's modulus, Pa; default E.")
+    nu_wall: float | None = Field(None, description="The walls' Poisson's ratio; default nu.")
     e_wall: float | None = Field(None, description="Item-wall restitution; default e.")
     mu_wall: float | None = Field(None, description="Item-wall friction; default mu.")
 

@@ -71,8 +71,8 @@ def run_feeder(
 ) -> SimulationResult:
     """Run one feeder experiment with these contact parameters; never raises.
 
-    ``params`` holds any of E, nu, e, mu and the optional E_wall, e_wall, mu_wall, the tray's
-    material and its pair with the items (missing ones come from ``config.params``); ``deadline``
+    ``params`` holds any of E, nu, e, mu and the optional item-wall ones (``dem/parameters.py``),
+    the tray's material and its pair with the items (missing ones come from ``config.params``); ``deadline``
     is a ``time.monotonic()`` value; ``should_stop()`` is polled between chunks; ``progress`` is
     called with (simulated time, items not yet discharged); ``snapshot_dir`` receives the files
     ``demcal render`` reads (see ``dem/scenarios/render.py``); ``vtk_dir`` receives ParaView files

@@ -17,7 +17,7 @@ from optimizer.study import StudyDefinition
 from tests.api.conftest import study_definition
 
 LOW, HIGH = 0.2, 0.6
-WALL = {"mu_wall": {"low": LOW, "high": HIGH}, "e_wall": {"fixed": 0.4}}
+WALL = {"mu_wall": {"low": LOW, "high": HIGH}, "e_wall": {"fixed": 0.4}, "nu_wall": {"fixed": 0.45}}
 
 
 def wall_friction_matters(spec):
@@ -54,11 +54,11 @@ def test_mu_wall_is_searched_within_its_bounds_and_shown_in_the_api_and_both_csv
     searched = [t["params"]["mu_wall"] for t in trials]
     assert len(trials) == 12 and all(LOW <= value <= HIGH for value in searched)
     assert len({round(value, 6) for value in searched}) >= 6  # searched, not one value
-    assert all(list(t["params"]) == ["E", "nu", "e", "mu", "e_wall", "mu_wall"] for t in trials)
-    assert all(t["params"]["e_wall"] == 0.4 for t in trials)
+    assert all(list(t["params"]) == ["E", "nu", "e", "mu", "nu_wall", "e_wall", "mu_wall"] for t in trials)
+    assert all(t["params"]["e_wall"] == 0.4 and t["params"]["nu_wall"] == 0.45 for t in trials)
     by_id = {t["id"]: t["params"]["mu_wall"] for t in trials}
     assert list(export[0]) == list(report[0])  # one table, two writers
-    assert list(export[0])[5:11] == ["E", "nu", "e", "mu", "e_wall", "mu_wall"]
+    assert list(export[0])[5:12] == ["E", "nu", "e", "mu", "nu_wall", "e_wall", "mu_wall"]
     for rows in (export, report, exported["trials"]):
         assert {row["trial_id"]: float(row["mu_wall"]) for row in rows} == pytest.approx(by_id)
     assert front and all(LOW <= point["params"]["mu_wall"] <= HIGH for point in front)
@@ -75,7 +75,7 @@ def test_a_study_without_wall_parameters_carries_the_four_and_stores_none(store)
     assert all(list(r.spec.params) == ["E", "nu", "e", "mu"] for r in store.trials(study_id))
 
 
-NAMES = "E, nu, e, mu (the items' material) and, optionally, E_wall, e_wall, mu_wall"
+NAMES = "E, nu, e, mu (the items' material) and, optionally, E_wall, nu_wall, e_wall, mu_wall"
 
 
 RANGE = "is outside the physical range"
@@ -88,6 +88,7 @@ RANGE = "is outside the physical range"
         ({"mu_wall": {"low": -0.1, "high": 0.9}}, f"parameters.mu_wall.low = -0.1 {RANGE} [0, inf)"),
         ({"e_wall": {"fixed": 1.5}}, f"parameters.e_wall.fixed = 1.5 {RANGE} (0, 1]"),
         ({"E_wall": {"low": 0, "high": 1e9}}, f"parameters.E_wall.low = 0 {RANGE} (0, inf)"),
+        ({"nu_wall": {"low": 0.2, "high": 0.5}}, f"parameters.nu_wall.high = 0.5 {RANGE} (-1, 0.5)"),
     ],
 )
 def test_unknown_or_unphysical_wall_parameters_are_422_saying_what_fits(client, keys, parameters, expected):

@@ -226,6 +226,7 @@ export const PARAMETERS = [
   { key: "e", label: "e", unit: "–", title: "restitution e (–)", log: false },
   { key: "mu", label: "μ", unit: "–", title: "friction μ (–)", log: false },
   { key: "E_wall", label: "E_wall", unit: "Pa", title: "walls' Young's modulus E_wall (Pa)", log: true, wall: true },
+  { key: "nu_wall", label: "ν_wall", unit: "–", title: "walls' Poisson's ratio ν_wall (–)", log: false, wall: true },
   { key: "e_wall", label: "e_wall", unit: "–", title: "item-wall restitution e_wall (–)", log: false, wall: true },
   { key: "mu_wall", label: "μ_wall", unit: "–", title: "item-wall friction μ_wall (–)", log: false, wall: true },
 ];
