@@ -97,8 +97,8 @@ class Parameters(_Strict):
     e: ParameterRange = Field(default_factory=ParameterRange, description="Restitution coefficient.")
     mu: ParameterRange = Field(default_factory=ParameterRange, description="Friction coefficient.")
     E_wall: ParameterRange | None = Field(
-        None, description="The walls' Young's modulus, Pa (the feeder's tray, the heap's floor); "
-        "omitted: the items' E.",
+        None, description="The walls' Young's modulus, Pa (the feeder's tray, the heap's plate and "
+        "cylinder); omitted: the items' E.",
     )
     nu_wall: ParameterRange | None = Field(
         None, description="The walls' Poisson's ratio (the item-wall pair's tangential stiffness); "

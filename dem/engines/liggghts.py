@@ -20,8 +20,9 @@ forces (``dem/contact.py`` is the reference):
   ours (``tangential history``); no rolling friction in either engine.
 
 The walls are of the items' material: a study or run naming an item-wall parameter is refused
-(``parameters``), since plate and cylinder share one atom type here while the built-in engine
-gives the floor alone the item-wall material.
+(``parameters``): plate and cylinder are one atom type here, and giving that type its own
+material with a pair per sphere type is not written yet (the built-in engine gives plate and
+cylinder the wall material).
 
 Scenarios reach LIGGGHTS through an adapter (``ADAPTERS``, keyed by scenario kind) that writes
 the case's files and reads its responses back. To add one: a class with ``refuses(config)``,

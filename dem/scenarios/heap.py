@@ -16,10 +16,14 @@ Protocol (every number is a config key, see ``examples/repose.toml``):
 
 Particles are either spheres (``particles.shape = "spheres"``: ``count`` spheres of
 ``diameter`` in ``size_classes`` sizes spread by ``size_spread``, density ``density``) or the
-feeder's items (``"items"``: ``particles.items`` as in the feeder's ``[items]``). The plate is
-the floor: of the particles' material, or, when a trial names E_wall, e_wall or mu_wall, of the
-item-wall material (``dem.materials.TrialMaterials``), as the feeder's tray is. The cylinder
-keeps the particles' material: it only holds the column and is lifted away.
+feeder's items (``"items"``: ``particles.items`` as in the feeder's ``[items]``). Plate and
+cylinder are the walls: of the particles' material, or, when a trial names an item-wall parameter
+(``dem/parameters.py``), both of the one wall material (``dem.materials.TrialMaterials``), as the
+feeder's tray is. Why the cylinder too: in a real test it is a tube of acrylic or steel, not of
+the grains, and its friction drags the column's rim while it rises, so a heap calibrated with the
+cylinder in the grains' material would put the tube's friction into mu. A rig whose plate and
+cylinder differ would need a second wall material, which the parameters do not offer (EDEM and
+Rocky give each geometry its own).
 
 Responses: ``angle_deg`` (the angle of repose, degrees) and ``height`` (the heap's height, m).
 Engines: the built-in one (spheres and items) and LIGGGHTS (spheres; ``dem/engines/liggghts.py``
@@ -199,7 +203,7 @@ class _HeapRun:
         self.geometry = heap_geometry(config, column)
         g = self.geometry
         half = 0.5 * config.plate.size
-        materials = TrialMaterials.of(params, wall="floor")
+        materials = TrialMaterials.of(params)
         self.sim = Simulation(
             materials.items,
             interactions=materials.interactions,
@@ -214,7 +218,8 @@ class _HeapRun:
         lift = LinearLift(
             (0.0, 0.0, 1.0), g.lift_distance, config.cylinder.lift_speed, config.stages.lift_start
         )
-        self.sim.add_wall(WallMesh(g.cylinder_vertices, g.cylinder_faces, motion=lift, name="cylinder"))
+        cylinder = g.cylinder_vertices, g.cylinder_faces
+        self.sim.add_wall(WallMesh(*cylinder, material=materials.walls, motion=lift, name="cylinder"))
         for clump, position, quat in bodies:
             self.sim.add_body(clump, position, quat)
         self.lift_end = lift.end_time
