@@ -313,7 +313,8 @@ def build_executor(settings: Settings) -> Any:
     from worker.local import LocalPoolExecutor
 
     return LocalPoolExecutor(
-        workers=settings.workers, snapshot_root=settings.snapshot_root, data_dir=settings.data_dir
+        workers=settings.workers, snapshot_root=settings.snapshot_root, data_dir=settings.data_dir,
+        nice=settings.worker_nice,
     )
 
 

@@ -13,6 +13,8 @@ from typing import Literal
 from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from worker.priority import DEFAULT_NICE
+
 SNAPSHOT_SUBDIR = "snapshots"  # below data_dir: see Settings.snapshot_root
 
 ENV_PREFIX = "DEMCAL_"
@@ -50,6 +52,10 @@ class Settings(BaseSettings):
         30.0, ge=2, le=3600, description="Seconds before a dead `demcal serve`'s studies go to another."
     )
     workers: int = Field(0, ge=0, le=512, description="Local worker processes; 0 means one per core.")
+    worker_nice: int = Field(
+        DEFAULT_NICE, ge=0, le=19,
+        description="Added to workers' nice value, so that DEM runs yield the CPU to the API; 0 = off.",
+    )
     host: str = Field("127.0.0.1", description="Address `demcal serve` binds to.")
     port: int = Field(8000, ge=1, le=65535, description="Port `demcal serve` listens on.")
     max_request_bytes: int = Field(2_000_000, ge=1024, description="Largest accepted JSON body.")

@@ -10,6 +10,8 @@ corrupt it, and this executor does kill processes:
 - deadlines: ``run_feeder`` ends a run with ``timeout`` once the spec's ``timeout_s`` has passed
   (checked between chunks); if a process is still busy ``grace_s`` after that, it is killed and
   the trial reported as ``timeout``;
+- priority: a new process lowers its CPU priority by ``nice`` (``worker/priority.py``) first, so
+  that the service it runs under stays responsive while trials compute;
 - warm-up: a new process runs ``worker.warmup.warm_up`` before its first trial, so no trial's T
   includes the kernels' compile (its first trial's hard deadline allows for it);
 - a process that dies (segfault in a kernel, out of memory) reports its trial as ``error`` with
@@ -40,6 +42,7 @@ from typing import Any
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import TrialOutcome, TrialSpec
 from worker.jobs import longest_first
+from worker.priority import DEFAULT_NICE, lower_priority
 
 logger = logging.getLogger(__name__)
 
@@ -53,9 +56,10 @@ WARMUP_ALLOWANCE_S = 120.0
 MAX_WAIT_S = 0.5
 
 
-def _serve(conn, log_level: int, snapshot_root: Path | None, data_dir: Path | None) -> None:
+def _serve(conn, log_level: int, snapshot_root: Path | None, data_dir: Path | None, nice: int) -> None:
     """A worker process: run the specs it receives until told to stop (None) or its pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    lower_priority(nice)
     # A spawned process starts with no logging set up; give the engine's records the parent's
     # level and a one-line format instead of Python's bare last-resort output.
     logging.basicConfig(
@@ -99,9 +103,10 @@ class LocalPoolExecutor:
 
     def __init__(
         self, workers: int = 0, *, grace_s: float = DEFAULT_GRACE_S, snapshot_root: Path | None = None,
-        data_dir: Path | None = None,
+        data_dir: Path | None = None, nice: int = DEFAULT_NICE,
     ):
         self.size = workers or os.cpu_count() or 1
+        self.nice = nice
         self.snapshot_root = snapshot_root
         self.data_dir = data_dir
         self.grace_s = grace_s
@@ -191,7 +196,9 @@ class LocalPoolExecutor:
         parent, child = self._context.Pipe()
         process = self._context.Process(
             target=_serve,
-            args=(child, logging.getLogger().getEffectiveLevel(), self.snapshot_root, self.data_dir),
+            args=(
+                child, logging.getLogger().getEffectiveLevel(), self.snapshot_root, self.data_dir, self.nice
+            ),
             daemon=True,
             name="demcal-local-worker",
         )

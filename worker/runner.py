@@ -51,6 +51,7 @@ from rq.job import Job
 from rq.serializers import JSONSerializer
 from rq.worker import WorkerStatus
 
+from worker.priority import DEFAULT_NICE, lower_priority
 from worker.rq_job import REDIS_OUTAGE
 
 logger = logging.getLogger(__name__)
@@ -181,13 +182,17 @@ def run_worker(
     log_level: str = "INFO",
     snapshot_root: Path | None = None,
     data_dir: Path | None = None,
+    nice: int = DEFAULT_NICE,
 ) -> bool:
     """Work until told to stop (or, with ``burst``, until the queues are empty; with
     ``max_jobs``, after that many trials, counted across restarts after a Redis outage).
 
     Returns True if at least one job was performed; raises ``ColdStop`` after a cold shutdown.
+    The process's priority is lowered by ``nice`` first (``worker/priority.py``).
     """
     from worker import rq_job
+
+    lower_priority(nice)
 
     rq_job.SNAPSHOT_ROOT = snapshot_root
     rq_job.DATA_DIR = data_dir

@@ -154,7 +154,8 @@ def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
     from worker.local import LocalPoolExecutor
 
     console = Console()
-    executor = LocalPoolExecutor(workers, snapshot_root=get_settings().snapshot_root)
+    settings = get_settings()
+    executor = LocalPoolExecutor(workers, snapshot_root=settings.snapshot_root, nice=settings.worker_nice)
     driver = Driver(store, executor)
     renewed = time.monotonic()
 

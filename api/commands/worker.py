@@ -54,6 +54,7 @@ def register(app: typer.Typer) -> None:
                 log_level=settings.log_level,
                 snapshot_root=settings.snapshot_root,
                 data_dir=settings.data_dir,
+                nice=settings.worker_nice,
             )
         except WorkerSetupError as exc:
             typer.secho(f"error: {exc}", err=True, fg="red")
