@@ -12,7 +12,7 @@ from datetime import datetime
 
 import sqlalchemy as sa
 
-from api.models import SimulationRow, StudyRow, TrialRow
+from api.models import SimulationRow, StudyRow, TrialRow, ValueKind
 from api.store.base import Page, StoreBase
 from optimizer.protocols import TrialState
 
@@ -104,21 +104,28 @@ class DashboardReads(StoreBase):
                 if f1 is not None
             }
 
-    def trial_columns(self, study_id: str) -> list[sa.Row]:
-        """Every trial's plot and summary columns, without the JSON blobs (for summaries)."""
-        with self.session() as s:
-            return list(
-                s.execute(
-                    sa.select(
-                        TrialRow.id, TrialRow.generation, TrialRow.individual, TrialRow.replicate,
-                        TrialRow.state, TrialRow.status, TrialRow.n_remaining, TrialRow.responses,
-                        TrialRow.wall_time_s, TrialRow.cost, TrialRow.pareto, TrialRow.f1_value,
-                        TrialRow.f1_kind, TrialRow.f2_value, TrialRow.f2_kind, TrialRow.params,
-                    )
-                    .where(TrialRow.study_id == study_id)
-                    .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate)
-                )
+    def trial_columns(self, study_id: str, f1_at_most: float | None = None) -> list[sa.Row]:
+        """Every trial's plot and summary columns, without the JSON blobs (for summaries); with
+        ``f1_at_most``, only the ok trials whose finite f1 is at most that (the matching ones:
+        most of a long study's trials are not, and reading them all was most of a
+        recommendation's cost)."""
+        query = (
+            sa.select(
+                TrialRow.id, TrialRow.generation, TrialRow.individual, TrialRow.replicate,
+                TrialRow.state, TrialRow.status, TrialRow.n_remaining, TrialRow.responses,
+                TrialRow.wall_time_s, TrialRow.cost, TrialRow.pareto, TrialRow.f1_value,
+                TrialRow.f1_kind, TrialRow.f2_value, TrialRow.f2_kind, TrialRow.params,
             )
+            .where(TrialRow.study_id == study_id)
+            .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate)
+        )
+        if f1_at_most is not None:
+            query = query.where(
+                TrialRow.status == "ok", TrialRow.f1_kind == ValueKind.FINITE.value,
+                TrialRow.f1_value <= f1_at_most,
+            )
+        with self.session() as s:
+            return list(s.execute(query))
 
     def pareto_rows(self, study_id: str) -> list[TrialRow]:
         with self.session() as s:

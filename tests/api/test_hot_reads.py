@@ -197,7 +197,8 @@ def test_polling_the_recommendation_builds_it_once_per_version(client, keys, sto
     study_id = _run(store, executor=SyntheticExecutor(_half_matching))
     built = []
     columns = SqlStore.trial_columns
-    monkeypatch.setattr(SqlStore, "trial_columns", lambda self, sid: built.append(sid) or columns(self, sid))
+    monkeypatch.setattr(SqlStore, "trial_columns",
+                        lambda self, sid, **filters: built.append(sid) or columns(self, sid, **filters))
     url = f"/api/v1/studies/{study_id}/recommendation"
 
     polls = [client.get(url, headers=keys.auth()).json() for _ in range(5)]

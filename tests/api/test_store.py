@@ -123,6 +123,25 @@ def test_save_generation_stores_infinite_objectives_portably(store):
     assert (rows[specs[1].trial_id].f1_value, rows[specs[1].trial_id].f2_kind) == (0.5, "-inf")
 
 
+def test_matching_trials_are_the_ok_ones_with_a_finite_f1_within_tolerance(store):
+    # What the recommendation reads: the filter runs in the database, so it must agree with the
+    # objectives' portable storage (specials in a kind column) on both backends.
+    study_id = store.create_study(_definition(), owner=None)
+    specs = _specs(study_id, 6)
+    store.add_trials(specs)
+    for spec in specs[:5]:
+        store.record_result(TrialOutcome(spec.trial_id, _result(4)))
+    store.record_result(TrialOutcome(specs[5].trial_id, SimulationResult(status=SimulationStatus.UNSTABLE)))
+    f1s = [0.0, 0.5, 0.7, math.inf, math.nan, 0.0]
+    store.save_generation(study_id, 1, b"s", [], None,
+                          objectives={spec.trial_id: (f1, 1.0) for spec, f1 in zip(specs, f1s, strict=True)})
+
+    matching = store.trial_columns(study_id, f1_at_most=0.5)
+
+    assert [row.id for row in matching] == [specs[0].trial_id, specs[1].trial_id]
+    assert len(store.trial_columns(study_id)) == 6
+
+
 def test_the_stored_objectives_are_those_the_driver_told_the_search(store):
     definition = StudyDefinition.model_validate(
         study_definition(ga={"population": 8, "offspring": 4, "generations": 3}, max_replicates=3, seed=3)
