@@ -23,7 +23,16 @@ revalidating what it has with the ETags it was sent as the browser does (304 whe
 ``--results-per-s`` stands for running workers: a writer process adds and finishes that many
 trials a second through the store, so every poll sees changes and every per-study cache is
 invalidated as in production.
+``--dem-workers N`` runs real DEM meanwhile: N processes of the local pool (``worker/local.py``,
+as ``demcal serve`` starts them, at the priority it gives them) simulating the quick feeder
+(``examples/study-quick.toml``) one trial after another; the load starts once each has finished
+its warm-up and a first trial. The writer still stands for their results (a quick trial takes
+seconds, the writer's pace is what a larger pool would write).
 Goal (issue 14): p99 under 100 ms with 50 clients polling every second while workers run.
+
+Besides the clients' latencies it prints the server's own (from a request's arrival in the app
+to its last byte sent), which leave out the time a request waits in the client's event loop or
+for the server's accept.
 """
 
 from __future__ import annotations
@@ -119,6 +128,7 @@ def accounted_app():
     lock = threading.Lock()
     requests: dict[str, int] = {}
     queries: dict[str, int] = {}
+    durations: dict[str, list[float]] = {}  # in the app, arrival to last byte, by kind
     current = contextvars.ContextVar("kind", default="background")  # copied into the thread pool
 
     def count_query(*args) -> None:
@@ -135,7 +145,7 @@ def accounted_app():
         if scope["path"] == "/bench/stats":
             with lock:
                 body = json.dumps({"requests": requests, "queries": queries, "cpu_s": time.process_time(),
-                                   "child_cpu_s": _children_cpu_s()})
+                                   "child_cpu_s": _children_cpu_s(), "durations": durations})
             await send({"type": "http.response.start", "status": 200,
                         "headers": [(b"content-type", b"application/json")]})
             await send({"type": "http.response.body", "body": body.encode()})
@@ -145,15 +155,24 @@ def accounted_app():
         current.set(kind)
         with lock:
             requests[kind] = requests.get(kind, 0) + 1
-        await app(scope, receive, send)
+        arrived = time.perf_counter()
+
+        async def timed_send(message):
+            await send(message)
+            if message["type"] == "http.response.body" and not message.get("more_body"):
+                with lock:
+                    durations.setdefault(kind, []).append(time.perf_counter() - arrived)
+
+        await app(scope, receive, timed_send)
 
     return accounted
 
 
-def _children_cpu_s() -> float:
-    """CPU seconds of this process's live children (the view-building child), from /proc."""
+def _children_cpu_s(pid: int | str = "self") -> float:
+    """CPU seconds of a process's live children (the server's view-building child, the DEM
+    workers of the pool process), from /proc."""
     total = 0.0
-    for children in Path("/proc/self/task").glob("*/children"):
+    for children in Path(f"/proc/{pid}/task").glob("*/children"):
         for pid in children.read_text().split():
             try:
                 fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -227,8 +246,38 @@ def write_results(url: str, study_id: str, per_s: float, stop: float, batch: int
         store.save_generation(study_id, generation, b"", pareto, None, objectives)
 
 
+def run_dem_workers(workers: int, ready, stop) -> None:
+    """``workers`` local-pool processes simulating the quick feeder, trial after trial, until
+    ``stop`` is set; ``ready`` is set once every process has finished a trial (warm-up done)."""
+    import tomllib
+
+    from optimizer.protocols import TrialSpec
+    from optimizer.study import StudyDefinition
+    from worker.local import LocalPoolExecutor
+
+    root = Path(__file__).resolve().parents[1]
+    with open(root / "examples" / "study-quick.toml", "rb") as handle:
+        scenario = StudyDefinition.model_validate(tomllib.load(handle)).model_dump(mode="json")["scenario"]
+    executor = LocalPoolExecutor(workers)  # the priority demcal serve gives its pool, by default
+    params = {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.5}
+    submitted, finished_by = 0, set()
+    try:
+        while not stop.is_set():
+            while len(executor.in_flight()) < 2 * workers:
+                executor.submit([TrialSpec(f"dem-{submitted}", "bench", submitted, 0, 0, submitted, params,
+                                           scenario)])
+                submitted += 1
+            for outcome in executor.poll(timeout=0.5):
+                finished_by.add(outcome.worker)
+            if len(finished_by) >= workers:
+                ready.set()
+    finally:
+        executor.close()
+
+
 async def load(
-    base: str, study_id: str, token: str, clients: int, seconds: float, think: float, dashboard: bool = False
+    base: str, study_id: str, token: str, clients: int, seconds: float, think: float, dashboard: bool = False,
+    probe=lambda: 0.0,
 ) -> dict:
     import httpx
 
@@ -321,13 +370,27 @@ async def load(
         for values in latencies.values():
             values.clear()
         before = (await client.get("/bench/stats")).json()
+        probed = probe()
+        client_cpu = time.process_time()
         started = time.monotonic()
         stop = started + seconds
-        await asyncio.gather(*(client_loop(i, client, stop) for i in range(clients)))
+        lags: list[float] = []
+        await asyncio.gather(*(client_loop(i, client, stop) for i in range(clients)), _lag(lags, stop))
         elapsed = time.monotonic() - started
+        client_cpu = time.process_time() - client_cpu
         after = (await client.get("/bench/stats")).json()
+        probed = probe() - probed
     return {"latencies": latencies, "elapsed": elapsed, "errors": errors, "not_modified": not_modified,
-            "server": _spent(before, after)}
+            "server": _spent(before, after), "dem_cpu_s": probed, "client_cpu_s": client_cpu, "lags": lags}
+
+
+async def _lag(lags: list[float], stop: float, every: float = 0.01) -> None:
+    """How late the clients' own event loop wakes a 10 ms sleep: time a response waited there
+    (parsing other responses, httpx's work) is in the clients' latencies, not the server's."""
+    while time.monotonic() < stop:
+        asked = time.perf_counter()
+        await asyncio.sleep(every)
+        lags.append(time.perf_counter() - asked - every)
 
 
 def _spent(before: dict, after: dict) -> dict:
@@ -338,6 +401,8 @@ def _spent(before: dict, after: dict) -> dict:
                 if n - before[name].get(kind, 0)}
 
     return {"requests": delta("requests"), "queries": delta("queries"),
+            "durations": {kind: values[len(before["durations"].get(kind, [])):]
+                          for kind, values in after["durations"].items()},
             "cpu_s": after["cpu_s"] - before["cpu_s"],
             "child_cpu_s": after["child_cpu_s"] - before["child_cpu_s"]}
 
@@ -358,6 +423,8 @@ def main() -> None:
     parser.add_argument("--dashboard", action="store_true", help="poll what the study page polls")
     parser.add_argument("--results-per-s", type=float, default=0.0,
                         help="trials finished per second meanwhile (running workers)")
+    parser.add_argument("--dem-workers", type=int, default=0,
+                        help="local-pool processes simulating DEM meanwhile (real workers)")
     args = parser.parse_args()
 
     workdir = tempfile.mkdtemp(prefix="demcal-bench-")
@@ -378,21 +445,38 @@ def main() -> None:
     port = _free_port()
     server = serve(url, port, args.server_workers)
     base = f"http://127.0.0.1:{port}"
-    writer = None
+    writer = dem = None
+    context = None
     try:
         asyncio.run(wait_ready(base))
-        if args.results_per_s:
-            import multiprocessing
+        import multiprocessing
 
+        context = multiprocessing.get_context("spawn")
+        probe = lambda: 0.0  # noqa: E731
+        if args.dem_workers:
+            ready, stop_dem = context.Event(), context.Event()
+            dem = context.Process(target=run_dem_workers, args=(args.dem_workers, ready, stop_dem))
+            dem.start()
+            if not ready.wait(900):
+                raise SystemExit("the DEM workers did not finish a first trial in 15 min")
+            probe = lambda: _children_cpu_s(dem.pid)  # noqa: E731
+            print(f"{args.dem_workers} DEM workers warm")
+        if args.results_per_s:
             until = time.time() + 3600  # ended with the load, however long warming the views takes
-            writer = multiprocessing.get_context("spawn").Process(
+            writer = context.Process(
                 target=write_results, args=(url, study_id, args.results_per_s, until)
             )
             writer.start()
         result = asyncio.run(
-            load(base, study_id, token, args.clients, args.seconds, args.think_ms / 1000.0, args.dashboard)
+            load(base, study_id, token, args.clients, args.seconds, args.think_ms / 1000.0, args.dashboard,
+                 probe)
         )
     finally:
+        if dem is not None:
+            stop_dem.set()
+            dem.join(30)
+            if dem.is_alive():
+                dem.kill()
         if writer is not None:
             writer.terminate()
             writer.join(10)
@@ -410,13 +494,18 @@ def main() -> None:
         mode += f", {args.results_per_s:g} results/s written meanwhile"
     print(f"{args.clients} clients, {mode}, {args.server_workers} server worker(s), "
           f"{result['elapsed']:.1f} s")
+    inside = result["server"]["durations"]
+    inside_all = [v for values in inside.values() for v in values]
     for kind, values in [*result["latencies"].items(), ("all", everything)]:
         if not values:
             print(f"  {kind:7s} n=     0")
             continue
+        own = inside_all if kind == "all" else inside.get(kind, [])
         print(
             f"  {kind:7s} n={len(values):6d}  p50={_percentile(values, 50) * 1000:7.1f} ms  "
             f"p99={_percentile(values, 99) * 1000:7.1f} ms"
+            + (f"  (in the server: p50 {_percentile(own, 50) * 1000:.1f} ms, p99 "
+               f"{_percentile(own, 99) * 1000:.1f} ms)" if own else "")
         )
     print(f"  throughput {len(everything) / result['elapsed']:.0f} req/s, errors {result['errors']}, "
           f"304 not modified {result['not_modified']}")
@@ -428,6 +517,12 @@ def main() -> None:
           f"({server['cpu_s']:.1f} s for {requests}); SQL statements per request: {per_kind}; "
           f"in background view builds: {server['queries'].get('background', 0)}; "
           f"its view-building child: {server['child_cpu_s']:.1f} CPU s")
+    lags = result["lags"]
+    print(f"  clients: {result['client_cpu_s']:.1f} CPU s; their event loop woke late by p50 "
+          f"{_percentile(lags, 50) * 1000:.1f} ms, p99 {_percentile(lags, 99) * 1000:.1f} ms")
+    if args.dem_workers:
+        print(f"  DEM workers: {result['dem_cpu_s']:.1f} CPU s in the measured phase "
+              f"({result['dem_cpu_s'] / result['elapsed']:.2f} cores)")
     print(f"  load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
