@@ -4,6 +4,7 @@ front, per-generation summary, recommendation, exports). Thin handlers over ``ap
 from __future__ import annotations
 
 import hashlib
+import math
 from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response, status
@@ -26,7 +27,9 @@ from optimizer.study import StudyDefinition
 router = APIRouter(prefix="/api/v1/studies", tags=["studies"])
 
 
-def cached_json(request: Request, body: bytes, current: bool = True) -> Response:
+def cached_json(
+    request: Request, body: bytes, current: bool = True, retry_after_s: float | None = None
+) -> Response:
     """A polled view's JSON with an ETag (its content's hash) and ``Cache-Control: no-cache``, so
     that a browser asks again each time with ``If-None-Match`` and an unchanged view comes back as
     an empty 304 instead of its bytes (the dashboard's fetch does this by itself).
@@ -34,9 +37,13 @@ def cached_json(request: Request, body: bytes, current: bool = True) -> Response
     ``X-Demcal-View`` says whether the view is of the study's current version or a stale one
     served while the current one builds (progress, identifiability): the dashboard asks for a
     view again only when the study changed or its last answer was stale. It is on every answer,
-    304s too, because a cache keeps a stored header the 304 does not replace."""
+    304s too, because a cache keeps a stored header the 304 does not replace. A stale view whose
+    next build rests (identifiability) also says in ``Retry-After`` how many seconds pass at least
+    before a newer version can be ready: the dashboard does not ask for it again before."""
     tag = f'"{hashlib.blake2b(body, digest_size=16).hexdigest()}"'
     headers = {"ETag": tag, "Cache-Control": "no-cache", "X-Demcal-View": "current" if current else "stale"}
+    if not current and retry_after_s is not None:
+        headers["Retry-After"] = str(max(1, math.ceil(retry_after_s)))
     if tag in request.headers.get("if-none-match", ""):
         return Response(status_code=status.HTTP_304_NOT_MODIFIED, headers=headers)
     return Response(body, media_type="application/json", headers=headers)
@@ -115,7 +122,7 @@ def identifiability(
 ):
     """Which searched parameters the experiment pins down, from the spread of the matching sets."""
     served = progress.identifiability_json(store, views, study_id, principal)
-    return cached_json(request, served.body, served.current)
+    return cached_json(request, served.body, served.current, served.retry_after_s)
 
 
 @router.get("/{study_id}/recommendation", response_model=RecommendationRead)

@@ -25,7 +25,10 @@ never takes more than 1 / (1 + rest) of a core however fast the versions come. I
 (seconds of CPU for a long study) rests 9 times its build: built after every batch of 20 quick
 trials it took two thirds of a core of a 2-core machine that also served 50 dashboards
 (``benchmarks/README.md``, session 5). ``serve`` says whether what it answers is the current
-version or a stale one, so that a client knows to ask again (``X-Demcal-View``).
+version or a stale one, so that a client knows to ask again (``X-Demcal-View``), and, for a view
+that rests, when a newer version can be ready at the earliest (the rest left plus one build's
+duration: ``Retry-After``): a page asking every poll for a view that rests was a third of the
+requests of 50 polling dashboards (session 6).
 
 What it must not do: decide what a view contains (``api/services/trials.py`` does).
 """
@@ -49,10 +52,12 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class Served:
     """A view's bytes, and whether they are of the version asked for (False: an older one, served
-    while the asked version builds or its build rests)."""
+    while the asked version builds or its build rests); for a stale one whose build rests, the
+    seconds before a newer version can be ready."""
 
     body: bytes
     current: bool
+    retry_after_s: float | None = None
 
 
 class StudyViewCache:
@@ -66,6 +71,7 @@ class StudyViewCache:
         self._refreshing: set[tuple[str, str]] = set()  # (view, study id) built in the background
         self._kept: OrderedDict[tuple[str, str], object] = OrderedDict()
         self._resting: dict[tuple[str, str], float] = {}  # (view, study id) -> monotonic time it may build
+        self._took: dict[tuple[str, str], float] = {}  # (view, study id) -> its last resting build's seconds
         self._lock = threading.Lock()
 
     def get_or_build(
@@ -87,9 +93,12 @@ class StudyViewCache:
                 self._entries.move_to_end(key)
                 return Served(entry[1], True)
             if stale_ok and entry is not None:
-                refresh = key not in self._refreshing and time.monotonic() >= self._resting.get(key, 0.0)
+                now = time.monotonic()
+                resting_s = self._resting.get(key, 0.0) - now
+                refresh = key not in self._refreshing and resting_s <= 0
                 if refresh:
                     self._refreshing.add(key)
+                retry_after_s = resting_s + self._took[key] if resting_s > 0 else None
             else:
                 pending = self._building.get((*key, version))
                 mine = pending is None
@@ -100,7 +109,7 @@ class StudyViewCache:
                 threading.Thread(
                     target=self._refresh, args=(key, version, build, rest), name=f"view-{view}", daemon=True
                 ).start()
-            return Served(entry[1], False)
+            return Served(entry[1], False, retry_after_s)
         if mine:
             self._build(key, version, build, pending)
         return Served(pending.result(), True)
@@ -152,6 +161,7 @@ class StudyViewCache:
                 self._store(key, version, body)
             if rest > 0:
                 self._resting[key] = ended + rest * (ended - started)
+                self._took[key] = ended - started
             self._refreshing.discard(key)
 
     def _store(self, key: tuple[str, str], version: Hashable, body: bytes) -> None:
@@ -160,3 +170,4 @@ class StudyViewCache:
         while len(self._entries) > self.max_entries:
             evicted, _ = self._entries.popitem(last=False)
             self._resting.pop(evicted, None)
+            self._took.pop(evicted, None)

@@ -78,3 +78,35 @@ def test_progress_polled_during_a_run_reads_each_batch_once_and_agrees_with_one_
     assert len({len(points) for points in shown}) > 3  # it was polled after most batches
     completed = [t.spec.trial_id for t in store.trials(study_id) if t.spec.generation < record.generation]
     assert sorted(read) == sorted(completed)  # each completed batch read once, however many polls
+
+
+def test_identifiability_resting_between_builds_says_when_to_ask_again(client, keys, store):
+    # A stale answer while the view rests carries Retry-After (its 304 too): dashboards asking
+    # for it every poll meanwhile made a third of their requests (benchmarks/README.md, session 6).
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 8, "offspring": 4, "generations": 3}, seed=7)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="alice")
+    Driver(store, SyntheticExecutor(synthetic_with_failures)).run_to_completion(study_id, poll_timeout=0)
+    url = f"/api/v1/studies/{study_id}/identifiability"
+    client.get(url, headers=keys.auth())  # built on the request: nothing to serve stale yet
+    generation = store.load_study(study_id).generation
+
+    def next_batch() -> None:
+        nonlocal generation
+        generation += 1
+        store.save_generation(study_id, generation, b"state", [], None, objectives={})
+
+    next_batch()
+    deadline = time.monotonic() + 60
+    while client.get(url, headers=keys.auth()).headers["X-Demcal-View"] != "current":  # built meanwhile
+        assert time.monotonic() < deadline, "the next version was never built"
+        time.sleep(0.05)
+    next_batch()
+    stale = client.get(url, headers=keys.auth())
+    revalidated = client.get(url, headers={**keys.auth(), "If-None-Match": stale.headers["ETag"]})
+
+    assert stale.status_code == 200 and stale.headers["X-Demcal-View"] == "stale"
+    assert int(stale.headers["Retry-After"]) >= 1
+    assert revalidated.status_code == 304
+    assert revalidated.headers["Retry-After"] == stale.headers["Retry-After"]

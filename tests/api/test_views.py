@@ -7,6 +7,8 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 
+import pytest
+
 from api.services.views import StudyViewCache
 
 
@@ -126,3 +128,30 @@ def test_a_resting_view_waits_rest_times_its_build_before_the_next_and_says_it_i
     # The second build started no sooner than 5 x 0.2 s after the first ended.
     assert builds[1][1] - built_2 >= 5 * 0.2 * 0.9
     assert built_3 - builds[1][1] >= 0.2
+
+
+def test_a_stale_answer_of_a_resting_view_says_when_a_newer_one_can_be_ready():
+    # Dashboards asked every poll for identifiability while it rested: a third of their requests.
+    views, built = StudyViewCache(), []
+    views.serve("identifiability", "s1", 1, lambda: b"v1", stale_ok=True)
+
+    def slow() -> bytes:
+        started = time.monotonic()
+        time.sleep(0.2)
+        built.append((started, time.monotonic()))
+        return b"v2"
+
+    building = views.serve("identifiability", "s1", 2, slow, stale_ok=True, rest=5.0)
+    deadline = time.monotonic() + 10
+    while not views.serve("identifiability", "s1", 2, slow, stale_ok=True, rest=5.0).current:
+        assert time.monotonic() < deadline, "version 2 was never built"
+        time.sleep(0.01)
+    asked = time.monotonic()
+    resting = views.serve("identifiability", "s1", 3, lambda: b"v3", stale_ok=True, rest=5.0)
+
+    started, ended = built[0]
+    took = ended - started
+    assert (building.current, building.retry_after_s) == (False, None)  # no build to rest after yet
+    assert (resting.body, resting.current) == (b"v2", False)
+    # The rest left (5 builds' time after the build ended), then one more build.
+    assert resting.retry_after_s == pytest.approx(ended + 5 * took - asked + took, abs=0.05)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import re
 import statistics
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -177,6 +178,44 @@ def test_new_results_alone_redraw_the_page_without_reading_its_views_again(page,
     assert after_result == first_load
     assert sorted(VIEWS.search(url).group(1) for url in read[first_load:first_load + 3]) == [
         "identifiability", "progress", "recommendation"]
+    assert page.errors == []
+
+
+def test_a_resting_view_is_not_asked_again_before_its_retry_after(page, dashboard, monkeypatch):
+    # Identifiability rests between builds and is served stale meanwhile: pages that asked for it
+    # at every poll until it changed made a third of 50 dashboards' requests (benchmarks/README.md,
+    # API session 6). Here it rests far longer than the test.
+    from api.services import progress
+
+    monkeypatch.setattr(progress, "IDENTIFIABILITY_REST", 10_000.0)
+    study_id = running_study(dashboard, "resting")
+    answers, polls = [], []
+
+    def seen(response) -> None:
+        if (match := VIEWS.search(response.url)) and match.group(1) == "identifiability":
+            headers = response.headers
+            answers.append((len(polls), headers.get("x-demcal-view"), headers.get("retry-after")))
+        elif response.url.endswith(f"/studies/{study_id}"):
+            polls.append(response)
+
+    def wait_for(condition, within_s: float = 60.0) -> None:
+        deadline = time.monotonic() + within_s
+        while not condition():
+            assert time.monotonic() < deadline, "the page never got there"
+            page.wait_for_timeout(200)
+
+    page.on("response", seen)
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function("() => document.getElementById('progress-caption').textContent !== ''")
+    dashboard.store.save_generation(study_id, 1, b"synthetic", [], None, objectives={})
+    wait_for(lambda: len(answers) > 1 and answers[-1][1] == "current")  # rebuilt; now it rests
+    dashboard.store.save_generation(study_id, 2, b"synthetic", [], None, objectives={})
+    wait_for(lambda: answers[-1][1] == "stale")
+    told_at, _, retry_after = answers[-1]
+    wait_for(lambda: len(polls) >= told_at + 3)  # two more polls
+
+    assert int(retry_after) > 60
+    assert [poll for poll, _, _ in answers if poll > told_at] == []
     assert page.errors == []
 
 

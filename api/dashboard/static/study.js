@@ -7,7 +7,9 @@
 // recommendation, progress and identifiability are read again only when the study changed
 // (its updated_at, generation or status: their versions), or one alone when its last answer was
 // a stale one (X-Demcal-View: the server builds a new version in the background and serves the
-// old one meanwhile); new trials alone redraw the recommendation's tables from the trials loaded.
+// old one meanwhile), but not before the Retry-After a stale answer gave (identifiability rests
+// between builds: asked every poll meanwhile, it was a third of 50 dashboards' requests); new
+// trials alone redraw the recommendation's tables from the trials loaded.
 
 import {
   ApiError, PARAMETERS, api, apiKey, clearBanner, el, experimentResponses, fmt, fmtTime, generationText,
@@ -30,7 +32,7 @@ let responses = []; // the experiments' responses with units (api.js experimentR
 let cursor = null; // server_time of the last page: the next poll asks only for newer changes
 const VIEWS = ["recommendation", "progress", "identifiability"];
 let viewsRead = null; // the study's version (updated_at, generation, status) the views were read at
-const views = {}; // each view's last answer: { body, current } (current: not a stale version)
+const views = {}; // each view's last answer: { body, current, retryAt } (current: not a stale version)
 
 // One request for the first page (it says how many match), then the rest in parallel.
 async function loadTrialChanges() {
@@ -182,10 +184,14 @@ const INTRO = {
   "not reproduced": "No candidate reproduced the experiment on fresh seeds (table below); the fastest match of the search:",
 };
 
-// A polled view's JSON, and whether the server said it is of the study's current version.
+// A polled view's JSON, whether the server said it is of the study's current version, and for a
+// stale one when a newer one can be ready at the earliest (Date.now() time; 0: ask at any poll).
 async function view(path) {
   const response = await api(path, { raw: true });
-  return { body: await response.json(), current: response.headers.get("X-Demcal-View") !== "stale" };
+  const current = response.headers.get("X-Demcal-View") !== "stale";
+  const retryAfter = Number(response.headers.get("Retry-After"));
+  const retryAt = !current && retryAfter > 0 ? Date.now() + retryAfter * 1000 : 0;
+  return { body: await response.json(), current, retryAt };
 }
 
 function renderRecommendation(body) {
@@ -348,9 +354,11 @@ async function refresh() {
     changed = await loadTrialChanges();
   }
   if (changed) await renderPlots();
-  // Every view when the study changed; otherwise only those last answered with a stale version.
+  // Every view when the study changed; otherwise only those last answered with a stale version;
+  // neither before the time a stale answer gave (the server would answer it again as it was).
   const version = `${study.updated_at} ${study.progress.generation} ${study.status}`;
-  const due = VIEWS.filter((name) => version !== viewsRead || !views[name].current);
+  const due = VIEWS.filter((name) => (version !== viewsRead || !views[name].current)
+    && !(views[name] && Date.now() < views[name].retryAt));
   const answers = await Promise.all(due.map((name) => view(`${base}/${name}`)));
   due.forEach((name, i) => { views[name] = answers[i]; });
   viewsRead = version;
