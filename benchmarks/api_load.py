@@ -18,7 +18,8 @@ Goal: p99 under 50 ms.
 ``--dashboard`` makes each client poll what the study page polls (``api/dashboard/static/
 study.js``): the study, the trials changed since its last poll (``updated_since``), and, when
 the study's version (updated_at, generation, status) changed, the recommendation, progress and
-identifiability (and meanwhile each one whose last answer was stale, ``X-Demcal-View``),
+identifiability (and meanwhile each one whose last answer was stale, ``X-Demcal-View``, once its
+``Retry-After`` has passed),
 revalidating what it has with the ETags it was sent as the browser does (304 when unchanged).
 ``--results-per-s`` stands for running workers: a writer process adds and finishes that many
 trials a second through the store, so every poll sees changes and every per-study cache is
@@ -39,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import os
 import random
 import socket
@@ -47,6 +49,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 from pathlib import Path
 
 N_TRIALS = 10_000
@@ -129,6 +133,8 @@ def accounted_app():
     requests: dict[str, int] = {}
     queries: dict[str, int] = {}
     durations: dict[str, list[float]] = {}  # in the app, arrival to last byte, by kind
+    lags: list[float] = []  # how late the server's event loop woke a 10 ms sleep
+    watching: list = []
     current = contextvars.ContextVar("kind", default="background")  # copied into the thread pool
 
     def count_query(*args) -> None:
@@ -142,10 +148,12 @@ def accounted_app():
         if scope["type"] != "http":
             await app(scope, receive, send)
             return
+        if not watching:
+            watching.append(asyncio.get_running_loop().create_task(_lag(lags, math.inf)))
         if scope["path"] == "/bench/stats":
             with lock:
                 body = json.dumps({"requests": requests, "queries": queries, "cpu_s": time.process_time(),
-                                   "child_cpu_s": _children_cpu_s(), "durations": durations})
+                                   "child_cpu_s": _children_cpu_s(), "durations": durations, "lags": lags})
             await send({"type": "http.response.start", "status": 200,
                         "headers": [(b"content-type", b"application/json")]})
             await send({"type": "http.response.body", "body": body.encode()})
@@ -276,9 +284,11 @@ def run_dem_workers(workers: int, ready, stop) -> None:
 
 
 async def load(
-    base: str, study_id: str, token: str, clients: int, seconds: float, think: float, dashboard: bool = False,
-    probe=lambda: 0.0,
+    base: str, study_id: str, token: str, clients: range, seconds: float, think: float, dashboard: bool,
+    start_at: float,
 ) -> dict:
+    """Clients numbered ``clients``, warming up until ``start_at`` (``time.time()``), then measured
+    for ``seconds``: their latencies, errors, 304s, CPU and event-loop lags."""
     import httpx
 
     headers = {"Authorization": f"Bearer {token}"}
@@ -286,7 +296,10 @@ async def load(
         "pareto", "trials"]
     latencies: dict[str, list[float]] = {kind: [] for kind in kinds}
     errors = not_modified = 0
-    limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
+    # A dashboard is a browser of its own, with up to 6 connections to the host (Chromium's limit);
+    # with one a client, its 3 view reads at a version change queued in the clients' shared pool.
+    connections = (6 if dashboard else 1) * len(clients)
+    limits = httpx.Limits(max_connections=connections, max_keepalive_connections=connections)
 
     async def timed(client: httpx.AsyncClient, kind: str, path: str, params=None, cache=None) -> dict | None:
         """One timed GET; its JSON, or None (counted as an error) for a failed request: a keep-alive
@@ -304,8 +317,10 @@ async def load(
             errors += 1
             return None
         latencies[kind].append(time.perf_counter() - start)
-        if cache is not None:  # as study.js reads it, a 304 carries it too
-            cache[("stale", path)] = response.headers.get("x-demcal-view") == "stale"
+        if cache is not None:  # as study.js reads them, a 304 carries them too
+            cache[("stale", path)] = stale = response.headers.get("x-demcal-view") == "stale"
+            retry = float(response.headers.get("retry-after", 0)) if stale else 0.0
+            cache[("retry", path)] = time.monotonic() + retry if retry > 0 else 0.0
         if response.status_code == 304 and cache is not None and path in cache:
             not_modified += 1
             return cache[path][1]
@@ -334,7 +349,8 @@ async def load(
                 continue
             cursor = page["server_time"]
             version = (body["updated_at"], body["progress"]["generation"], body["status"])
-            due = [path for path in views if version != views_read or cache.get(("stale", path))]
+            due = [path for path in views if (version != views_read or cache.get(("stale", path)))
+                   and time.monotonic() >= cache.get(("retry", path), 0.0)]
             await asyncio.gather(*(timed(client, path.rsplit("/", 1)[1], path, cache=cache) for path in due))
             views_read = version
             await asyncio.sleep(think * rng.uniform(0.5, 1.5))
@@ -361,27 +377,55 @@ async def load(
                 await asyncio.sleep(think * rng.uniform(0.5, 1.5))
 
     async with httpx.AsyncClient(base_url=base, limits=limits, timeout=30) as client:
-        if dashboard:  # the pages are open already: their first load built the study's views
-            for view in ("", "/recommendation", "/progress", "/identifiability"):
-                (await client.get(f"/api/v1/studies/{study_id}{view}", headers=headers, timeout=300)
-                 ).raise_for_status()
-        warm_stop = time.monotonic() + 2.0
-        await asyncio.gather(*(client_loop(i, client, warm_stop) for i in range(clients)))
+        warm_stop = time.monotonic() + max(start_at - time.time(), 0.0)
+        await asyncio.gather(*(client_loop(i, client, warm_stop) for i in clients))
         for values in latencies.values():
             values.clear()
-        before = (await client.get("/bench/stats")).json()
-        probed = probe()
+        errors = not_modified = 0
         client_cpu = time.process_time()
         started = time.monotonic()
         stop = started + seconds
         lags: list[float] = []
-        await asyncio.gather(*(client_loop(i, client, stop) for i in range(clients)), _lag(lags, stop))
+        await asyncio.gather(*(client_loop(i, client, stop) for i in clients), _lag(lags, stop))
         elapsed = time.monotonic() - started
         client_cpu = time.process_time() - client_cpu
-        after = (await client.get("/bench/stats")).json()
-        probed = probe() - probed
     return {"latencies": latencies, "elapsed": elapsed, "errors": errors, "not_modified": not_modified,
-            "server": _spent(before, after), "dem_cpu_s": probed, "client_cpu_s": client_cpu, "lags": lags}
+            "client_cpu_s": client_cpu, "lags": lags}
+
+
+def _client_process(*args) -> dict:
+    return asyncio.run(load(*args))
+
+
+def measure(base: str, study_id: str, token: str, args, probe) -> dict:
+    """The load of ``args.clients`` clients in ``args.client_processes`` processes (50 dashboards
+    are 50 browsers: one Python process running them all adds its own queueing to their
+    latencies), and what the server and the DEM workers (``probe``) spent meanwhile."""
+    import httpx
+
+    headers = {"Authorization": f"Bearer {token}"}
+    if args.dashboard:  # the pages are open already: their first load built the study's views
+        for view in ("", "/recommendation", "/progress", "/identifiability"):
+            url = f"{base}/api/v1/studies/{study_id}{view}"
+            httpx.get(url, headers=headers, timeout=300).raise_for_status()
+    start_at = time.time() + 8.0  # the processes start, then their clients warm up until then
+    share = [range(k, args.clients, args.client_processes) for k in range(args.client_processes)]
+    with ProcessPoolExecutor(args.client_processes, mp_context=get_context("spawn")) as pool:
+        futures = [pool.submit(_client_process, base, study_id, token, clients, args.seconds,
+                               args.think_ms / 1000.0, args.dashboard, start_at) for clients in share]
+        time.sleep(max(start_at - time.time(), 0.0))
+        before = httpx.get(f"{base}/bench/stats").json()
+        probed = probe()
+        parts = [future.result() for future in futures]
+        after = httpx.get(f"{base}/bench/stats").json()
+        probed = probe() - probed
+    kinds = parts[0]["latencies"]
+    return {
+        "latencies": {kind: [v for part in parts for v in part["latencies"][kind]] for kind in kinds},
+        "elapsed": max(part["elapsed"] for part in parts), "server": _spent(before, after),
+        "dem_cpu_s": probed, "lags": [lag for part in parts for lag in part["lags"]],
+        **{name: sum(part[name] for part in parts) for name in ("errors", "not_modified", "client_cpu_s")},
+    }
 
 
 async def _lag(lags: list[float], stop: float, every: float = 0.01) -> None:
@@ -403,6 +447,7 @@ def _spent(before: dict, after: dict) -> dict:
     return {"requests": delta("requests"), "queries": delta("queries"),
             "durations": {kind: values[len(before["durations"].get(kind, [])):]
                           for kind, values in after["durations"].items()},
+            "lags": after["lags"][len(before["lags"]):],
             "cpu_s": after["cpu_s"] - before["cpu_s"],
             "child_cpu_s": after["child_cpu_s"] - before["child_cpu_s"]}
 
@@ -423,6 +468,8 @@ def main() -> None:
     parser.add_argument("--dashboard", action="store_true", help="poll what the study page polls")
     parser.add_argument("--results-per-s", type=float, default=0.0,
                         help="trials finished per second meanwhile (running workers)")
+    parser.add_argument("--client-processes", type=int, default=1,
+                        help="processes the clients are spread over (each with its own event loop)")
     parser.add_argument("--dem-workers", type=int, default=0,
                         help="local-pool processes simulating DEM meanwhile (real workers)")
     args = parser.parse_args()
@@ -449,9 +496,7 @@ def main() -> None:
     context = None
     try:
         asyncio.run(wait_ready(base))
-        import multiprocessing
-
-        context = multiprocessing.get_context("spawn")
+        context = get_context("spawn")
         probe = lambda: 0.0  # noqa: E731
         if args.dem_workers:
             ready, stop_dem = context.Event(), context.Event()
@@ -467,10 +512,7 @@ def main() -> None:
                 target=write_results, args=(url, study_id, args.results_per_s, until)
             )
             writer.start()
-        result = asyncio.run(
-            load(base, study_id, token, args.clients, args.seconds, args.think_ms / 1000.0, args.dashboard,
-                 probe)
-        )
+        result = measure(base, study_id, token, args, probe)
     finally:
         if dem is not None:
             stop_dem.set()
@@ -492,8 +534,8 @@ def main() -> None:
         "closed loop" if not args.think_ms else f"think time {args.think_ms:g} ms")
     if args.results_per_s:
         mode += f", {args.results_per_s:g} results/s written meanwhile"
-    print(f"{args.clients} clients, {mode}, {args.server_workers} server worker(s), "
-          f"{result['elapsed']:.1f} s")
+    print(f"{args.clients} clients in {args.client_processes} process(es), {mode}, "
+          f"{args.server_workers} server worker(s), {result['elapsed']:.1f} s")
     inside = result["server"]["durations"]
     inside_all = [v for values in inside.values() for v in values]
     for kind, values in [*result["latencies"].items(), ("all", everything)]:
@@ -517,9 +559,13 @@ def main() -> None:
           f"({server['cpu_s']:.1f} s for {requests}); SQL statements per request: {per_kind}; "
           f"in background view builds: {server['queries'].get('background', 0)}; "
           f"its view-building child: {server['child_cpu_s']:.1f} CPU s")
-    lags = result["lags"]
-    print(f"  clients: {result['client_cpu_s']:.1f} CPU s; their event loop woke late by p50 "
-          f"{_percentile(lags, 50) * 1000:.1f} ms, p99 {_percentile(lags, 99) * 1000:.1f} ms")
+    def late(lags: list[float]) -> str:
+        stalled = sum(lag for lag in lags if lag > 0.05)
+        return (f"p50 {_percentile(lags, 50) * 1000:.1f} ms, p99 {_percentile(lags, 99) * 1000:.1f} ms, "
+                f"max {max(lags) * 1000:.0f} ms ({stalled:.1f} s late by over 50 ms)")
+
+    print(f"  clients: {result['client_cpu_s']:.1f} CPU s; a 10 ms sleep woke late in their event loop by "
+          f"{late(result['lags'])}, in the server's by {late(server['lags'])}")
     if args.dem_workers:
         print(f"  DEM workers: {result['dem_cpu_s']:.1f} CPU s in the measured phase "
               f"({result['dem_cpu_s'] / result['elapsed']:.2f} cores)")
