@@ -55,8 +55,11 @@ others (``delta_k < 2 M / 3``) pulls (``f_k < 0``). It must: a resolution-indepe
 the overlaps whose forces never pull is ``K max(delta)^2 / 2``, all force on the deepest sphere,
 jumping between spheres of a flat face. The pull of one contact is at most ``F / 3`` and vanishes as
 it enters; the pair's net normal force ``F sum_k dM/d(delta_k)`` could in principle turn negative
-(one deep contact among many at a tenth of its depth), but over 10 000 random poses of the
-feeder's 12-sphere items on a plane it stayed above 0.39 F; a face resting on it
+(one deep contact among many at a tenth of its depth). For the feeder's 12-sphere items on a
+plane, with every overlap within ``OVERLAP_LIMIT`` of its radius, it stays above 0.1 F (0.105 F at
+worst, a camera's large sphere at the limit with five small ones shallow; random poses stay above
+0.19 F); between two clumps no positive bound holds in every pose (a sphere wedged between two of
+the other's): ``tests/dem/test_clump_pair_normal_force.py``. A face resting on a plane
 rocks with ``4 K <x^2>`` per radian (independent springs would give ``K <x^2>``).
 
 Friction is shared with the non-negative weights ``w_k = delta_k^2 / sum delta_j^2`` (they sum
