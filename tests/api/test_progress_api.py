@@ -109,4 +109,4 @@ def test_identifiability_resting_between_builds_says_when_to_ask_again(client, k
     assert stale.status_code == 200 and stale.headers["X-Demcal-View"] == "stale"
     assert int(stale.headers["Retry-After"]) >= 1
     assert revalidated.status_code == 304
-    assert revalidated.headers["Retry-After"] == stale.headers["Retry-After"]
+    assert 1 <= int(revalidated.headers["Retry-After"]) <= int(stale.headers["Retry-After"])  # counting down
