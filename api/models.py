@@ -114,6 +114,8 @@ class StudyRow(Base):
     # The lease of the process driving the study (``api/store/leases.py``): who, and until when.
     driver: Mapped[str | None] = mapped_column(sa.String(200))
     driver_until: Mapped[datetime | None]
+    # The last change number given to a write of its trials (``StoreBase._change_numbers``).
+    trial_changes: Mapped[int] = mapped_column(sa.BigInteger, default=0, server_default="0")
 
     trials: Mapped[list[TrialRow]] = relationship(
         back_populates="study", cascade="all, delete-orphan", passive_deletes=True, lazy="raise"
@@ -128,6 +130,7 @@ class TrialRow(Base):
         # The trial list's order: pages are read straight off this index, no sort per request.
         sa.Index("ix_trials_study_order", "study_id", "generation", "individual", "replicate"),
         sa.Index("ix_trials_study_updated", "study_id", "updated_at"),
+        sa.Index("ix_trials_study_change", "study_id", "change_number"),
         sa.Index("ix_trials_study_pareto", "study_id", "pareto"),
         sa.UniqueConstraint("study_id", "individual", "replicate"),
     )
@@ -162,6 +165,8 @@ class TrialRow(Base):
     f2_kind: Mapped[str | None] = mapped_column(sa.String(8))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+    # The study's change number of the last write to this trial: the driver's cursor.
+    change_number: Mapped[int] = mapped_column(sa.BigInteger, default=0, server_default="0")
     started_at: Mapped[datetime | None]
     finished_at: Mapped[datetime | None]
 

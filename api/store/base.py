@@ -10,7 +10,7 @@ from typing import Any
 import sqlalchemy as sa
 
 from api.db import session_factory, unit_of_work
-from api.models import TrialRow
+from api.models import StudyRow, TrialRow
 from dem.result import SimulationResult
 from optimizer.protocols import TrialRecord, TrialSpec, TrialState
 
@@ -40,6 +40,25 @@ class StoreBase:
     def session(self):
         """A unit of work on this store's database (commit on exit, roll back on error)."""
         return unit_of_work(self._sessions)
+
+    def _change_numbers(self, s, study_ids: Iterable[str]) -> dict[str, int]:
+        """The next change number of each study, for the writes to its trials in the unit of work
+        ``s`` (``TrialRow.change_number``; the driver's cursor, ``changed_trials``). Taking it
+        updates the study's row, which the database keeps locked until the commit (SQLite: one
+        writer at a time), so numbers are handed out in commit order: a reader that saw number n
+        has seen every write numbered up to n, however late a write committed or whatever its
+        process's clock said (a cursor of wall-clock stamps could miss those). Called before the
+        unit of work touches the trials, in one order of studies, so writers lock alike."""
+        numbers = {}
+        for study_id in sorted(set(study_ids)):
+            numbers[study_id] = s.execute(
+                sa.update(StudyRow)
+                .where(StudyRow.id == study_id)
+                .values(trial_changes=StudyRow.trial_changes + 1, updated_at=StudyRow.updated_at)
+                .returning(StudyRow.trial_changes)
+                .execution_options(synchronize_session=False)
+            ).scalar_one_or_none() or 0
+        return numbers
 
     def _newest_first(self, model, visible_to: str | None, limit: int, offset: int) -> Page:
         """A page of an owned resource (shapes, simulations), newest first, with the total."""

@@ -152,6 +152,7 @@ class StudyStore(StoreBase):
                 .values(status=to.value, message=message, updated_at=utcnow(), **_time_columns(to))
             ).rowcount
             if done and to is StudyStatus.CANCELLED:
+                number = self._change_numbers(s, [study_id])[study_id]  # the study's row is locked already
                 s.execute(
                     sa.update(TrialRow)
                     .where(
@@ -160,7 +161,7 @@ class StudyStore(StoreBase):
                             [TrialState.PENDING.value, TrialState.QUEUED.value, TrialState.RUNNING.value]
                         ),
                     )
-                    .values(state=TrialState.CANCELLED.value, updated_at=utcnow())
+                    .values(state=TrialState.CANCELLED.value, updated_at=utcnow(), change_number=number)
                 )
             return bool(done)
 
@@ -185,6 +186,7 @@ class StudyStore(StoreBase):
         protocol says; trials not named keep theirs."""
         with self.session() as s:
             row = self._study_row(s, study_id)
+            number = self._change_numbers(s, [study_id])[study_id]
             row.generation = generation
             row.ga_state = ga_state
             row.recommendation = recommendation
@@ -192,13 +194,13 @@ class StudyStore(StoreBase):
             s.execute(
                 sa.update(TrialRow)
                 .where(TrialRow.study_id == study_id, TrialRow.pareto.is_(True))
-                .values(pareto=False, updated_at=now)
+                .values(pareto=False, updated_at=now, change_number=number)
             )
             for chunk in chunks(list(pareto_trial_ids), 500):
                 s.execute(
                     sa.update(TrialRow)
                     .where(TrialRow.study_id == study_id, TrialRow.id.in_(chunk))
-                    .values(pareto=True, updated_at=now)
+                    .values(pareto=True, updated_at=now, change_number=number)
                 )
             if objectives:
                 updates = []
@@ -207,7 +209,7 @@ class StudyStore(StoreBase):
                     f2_value, f2_kind = encode_value(values[1] if len(values) > 1 else None)
                     updates.append(
                         {"id": tid, "f1_value": f1_value, "f1_kind": f1_kind,
-                         "f2_value": f2_value, "f2_kind": f2_kind, "updated_at": now}
+                         "f2_value": f2_value, "f2_kind": f2_kind, "updated_at": now, "change_number": number}
                     )
                 s.execute(sa.update(TrialRow), updates)
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from datetime import datetime
 
 import sqlalchemy as sa
 from sqlalchemy.orm import undefer
@@ -31,6 +30,9 @@ class TrialStore(StoreBase):
             for chunk in chunks(ids, 500):
                 existing.update(s.scalars(sa.select(TrialRow.id).where(TrialRow.id.in_(chunk))))
             now = utcnow()
+            numbers = self._change_numbers(
+                s, {spec.study_id for spec in specs if spec.trial_id not in existing}
+            )
             new_rows = [
                 {
                     "id": spec.trial_id, "study_id": spec.study_id, "individual": spec.individual,
@@ -39,7 +41,7 @@ class TrialStore(StoreBase):
                     "engine": spec.engine, "engine_options": spec.engine_options,
                     "timeout_s": spec.timeout_s, "state": TrialState.PENDING.value,
                     "message": "", "attempts": 0, "pareto": False,
-                    "created_at": now, "updated_at": now,
+                    "created_at": now, "updated_at": now, "change_number": numbers[spec.study_id],
                 }
                 for spec in specs
                 if spec.trial_id not in existing
@@ -68,20 +70,18 @@ class TrialStore(StoreBase):
         with self.session() as s:
             return [trial_record(row) for row in s.scalars(query)]
 
-    def changed_trials(
-        self, study_id: str, since: datetime | None = None
-    ) -> tuple[list[TrialRecord], datetime | None]:
-        """Trials whose ``updated_at`` is at or after the cursor (every write sets it), and the
-        newest ``updated_at`` read as the next cursor. ">=" sends a row written in the same clock
-        tick again rather than miss it. A row committed late with an older stamp (another
-        process's clock, a slow commit) can still be missed: the driver reads everything again
-        when it reconciles (``Driver.reconcile_every_s``)."""
+    def changed_trials(self, study_id: str, since: int | None = None) -> tuple[list[TrialRecord], int | None]:
+        """Trials written after the cursor ``since``, a change number of the study (every write
+        to its trials takes the next one, in commit order: ``_change_numbers``), and the newest
+        number read as the next cursor. Wall-clock stamps missed a row committed late with an
+        older stamp (another process's clock behind, a slow commit); numbers cannot."""
         query = _records(study_id)
         if since is not None:
-            query = query.where(TrialRow.updated_at >= since)
+            query = query.where(TrialRow.change_number > since)
         with self.session() as s:
             rows = list(s.scalars(query))
-            return [trial_record(row) for row in rows], max((row.updated_at for row in rows), default=since)
+            newest = max((row.change_number for row in rows), default=since)
+            return [trial_record(row) for row in rows], newest
 
     def mark_queued(self, trial_ids: Sequence[str], message: str = "") -> None:
         """Queued: the driver handed them to the executor, the first time or again (a trial it
@@ -104,12 +104,19 @@ class TrialStore(StoreBase):
         """The trials among ``trial_ids`` in one of ``from_states`` get ``values``: the database
         decides, so a trial that moved on meanwhile (done, cancelled) is left as it is."""
         with self.session() as s:
+            studies: dict[str, list[str]] = {}
             for chunk in chunks(list(trial_ids), 500):
-                s.execute(
-                    sa.update(TrialRow)
-                    .where(TrialRow.id.in_(chunk), TrialRow.state.in_([st.value for st in from_states]))
-                    .values(updated_at=utcnow(), **values)
-                )
+                rows = s.execute(sa.select(TrialRow.id, TrialRow.study_id).where(TrialRow.id.in_(chunk)))
+                for trial, study in rows:
+                    studies.setdefault(study, []).append(trial)
+            numbers = self._change_numbers(s, studies)
+            for study, ids in studies.items():
+                for chunk in chunks(ids, 500):
+                    s.execute(
+                        sa.update(TrialRow)
+                        .where(TrialRow.id.in_(chunk), TrialRow.state.in_([st.value for st in from_states]))
+                        .values(updated_at=utcnow(), change_number=numbers[study], **values)
+                    )
 
     def record_result(self, outcome: TrialOutcome) -> bool:
         result = outcome.result
@@ -122,6 +129,8 @@ class TrialStore(StoreBase):
         if outcome.worker is not None:
             values["worker"] = outcome.worker
         with self.session() as s:
+            study = s.scalar(sa.select(TrialRow.study_id).where(TrialRow.id == outcome.trial_id))
+            values["change_number"] = self._change_numbers(s, [study]).get(study, 0) if study else 0
             recorded = s.execute(
                 sa.update(TrialRow)
                 .where(

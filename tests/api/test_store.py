@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import threading
+from datetime import timedelta
 
 import pytest
 
@@ -140,6 +141,29 @@ def test_matching_trials_are_the_ok_ones_with_a_finite_f1_within_tolerance(store
 
     assert [row.id for row in matching] == [specs[0].trial_id, specs[1].trial_id]
     assert len(store.trial_columns(study_id)) == 6
+
+
+def test_a_result_committed_with_a_clock_behind_is_not_missed_by_the_next_read(store, monkeypatch):
+    # The driver reads only what changed since its cursor. With the newest updated_at read as the
+    # cursor, a write stamped earlier by another process (its clock behind) fell behind it.
+    import api.store.trials as trial_writes
+
+    study_id = store.create_study(_definition(), owner=None)
+    specs = _specs(study_id, 2)
+    store.add_trials(specs)
+    _, cursor = store.changed_trials(study_id)
+    store.record_result(TrialOutcome(specs[0].trial_id, _result(4)))
+    first, cursor = store.changed_trials(study_id, cursor)
+    clock = trial_writes.utcnow
+    monkeypatch.setattr(trial_writes, "utcnow", lambda: clock() - timedelta(seconds=5))
+    store.record_result(TrialOutcome(specs[1].trial_id, _result(3)))  # another process, 5 s behind
+    monkeypatch.undo()
+
+    late, _ = store.changed_trials(study_id, cursor)
+
+    results = {record.spec.trial_id: record.result for record in late}
+    assert specs[0].trial_id in {record.spec.trial_id for record in first}
+    assert results[specs[1].trial_id].n_remaining == 3
 
 
 def test_the_stored_objectives_are_those_the_driver_told_the_search(store):
