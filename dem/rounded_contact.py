@@ -18,11 +18,18 @@ Cheap rejections come first, so GJK runs only for pieces that nearly touch:
 * facets: the core's extent along the facet normal (two support queries) against the plane,
   then per triangle the distance of the ball about the body's centre that holds the core.
 
-A facet of several coplanar triangles is one contact: D is the smallest over its triangles, and
-the patch combines the triangles near that distance weighted by their patch areas (or lengths).
-A core is a vertex array and a ``dem.convex.Core``, a crown a 3-tuple, a facet the wall's
-triangle array and a ``WallFacet``. Pure numba; the only allocations are a facet contact's
-per-triangle table (each triangle's GJK once for its three passes) and its patch sums.
+A facet of several coplanar triangles is one contact. Where the core's features that can touch
+(those within ``r + tol`` of its lowest point) lie over the inside of the facet, as a piece on
+the tray's floor or against the middle of a wall does, the facet is its plane for them: the
+closest point is the core's lowest vertex, with no GJK, and the crowned contact and the patch are
+taken against one triangle of the plane around them (``_plane_geometry``). Elsewhere (a piece
+over the facet's boundary) D is the smallest over its triangles, and the patch combines the
+triangles near that distance weighted by their patch areas (or lengths); there a face lying over
+an inner edge can be pinned to that edge (a triangle's closest points on its edge give it a
+tilted normal), which the plane does not do. A core is a vertex array and a
+``dem.convex.Core``, a crown a 3-tuple, a facet the wall's triangle array and a ``WallFacet``.
+Pure numba; the only allocations are a facet contact's per-triangle table (each triangle's GJK
+once for its three passes) and its patch sums, or the plane's triangle.
 """
 
 from __future__ import annotations
@@ -66,6 +73,128 @@ def _extent(verts, core, nx, ny, nz):
     hx, hy, hz = support(verts, core, nx, ny, nz)
     lx, ly, lz = support(verts, core, -nx, -ny, -nz)
     return lx * nx + ly * ny + lz * nz, hx * nx + hy * ny + hz * nz
+
+
+@numba.njit(**JIT_FLAGS)
+def _segment_meets_box(p, q, box):
+    """Whether the segment p-q (2-tuples) meets the box (u_min, u_max, w_min, w_max)."""
+    u0, u1, w0, w1 = box
+    if max(p[0], q[0]) < u0 or min(p[0], q[0]) > u1 or max(p[1], q[1]) < w0 or min(p[1], q[1]) > w1:
+        return False
+    eu, ew = q[0] - p[0], q[1] - p[1]
+    above = below = False
+    for cu, cw in ((u0, w0), (u1, w0), (u0, w1), (u1, w1)):
+        side = eu * (cw - p[1]) - ew * (cu - p[0])
+        above = above or side >= 0.0
+        below = below or side <= 0.0
+    return above and below
+
+
+@numba.njit(**JIT_FLAGS)
+def _shared(tri, facet, t, c):
+    """Whether edge c (corners c, c + 1) of triangle t is an edge of another triangle of the
+    facet: an inner edge of the facet, not its boundary."""
+    p, q = 3 * t + c, 3 * t + (c + 1) % 3
+    for s in range(facet.start, facet.start + facet.count):
+        if s == t:
+            continue
+        for e in range(3):
+            x, y = 3 * s + e, 3 * s + (e + 1) % 3
+            same = tri[x, 0] == tri[p, 0] and tri[x, 1] == tri[p, 1] and tri[x, 2] == tri[p, 2]
+            same = same and tri[y, 0] == tri[q, 0] and tri[y, 1] == tri[q, 1] and tri[y, 2] == tri[q, 2]
+            flip = tri[x, 0] == tri[q, 0] and tri[x, 1] == tri[q, 1] and tri[x, 2] == tri[q, 2]
+            flip = flip and tri[y, 0] == tri[p, 0] and tri[y, 1] == tri[p, 1] and tri[y, 2] == tri[p, 2]
+            if same or flip:
+                return True
+    return False
+
+
+@numba.njit(**JIT_FLAGS)
+def _footprint(va, a, facet, reach):
+    """The box (u_min, u_max, w_min, w_max), in ``plane_basis`` of the facet's normal and the
+    wall's reference position, of the vertices of core ``a`` at most ``reach`` above its lowest
+    one along the normal (one pass: a vertex is taken against the lowest seen so far, so the box
+    may hold a few more)."""
+    nx, ny, nz = facet.normal
+    ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
+    r0, r1, r2 = a.rot
+    px, py, pz = a.pos[0] - facet.disp[0], a.pos[1] - facet.disp[1], a.pos[2] - facet.disp[2]
+    low = np.inf
+    u0 = w0 = np.inf
+    u1 = w1 = -np.inf
+    for v in range(a.start, a.start + a.count):
+        x = px + r0[0] * va[v, 0] + r0[1] * va[v, 1] + r0[2] * va[v, 2]
+        y = py + r1[0] * va[v, 0] + r1[1] * va[v, 1] + r1[2] * va[v, 2]
+        z = pz + r2[0] * va[v, 0] + r2[1] * va[v, 1] + r2[2] * va[v, 2]
+        h = x * nx + y * ny + z * nz
+        low = min(low, h)
+        if h <= low + reach:
+            cu, cw = x * ux + y * uy + z * uz, x * wx + y * wy + z * wz
+            u0, u1, w0, w1 = min(u0, cu), max(u1, cu), min(w0, cw), max(w1, cw)
+    margin = 1e-9 * (u1 - u0 + w1 - w0) + 1e-12  # rounding: an edge touching the box counts
+    return u0 - margin, u1 + margin, w0 - margin, w1 + margin
+
+
+@numba.njit(**JIT_FLAGS)
+def _in_plane(tri, k, ux, uy, uz, wx, wy, wz):
+    """Row k of the triangle array in the plane's coordinates (u, w)."""
+    return tri[k, 0] * ux + tri[k, 1] * uy + tri[k, 2] * uz, tri[k, 0] * wx + tri[k, 1] * wy + tri[k, 2] * wz
+
+
+@numba.njit(**JIT_FLAGS)
+def _inside_facet(tri, facet, box):
+    """Whether the box (``_footprint``) lies inside the facet (triangles of ``tri`` at the
+    reference position): its centre is on the facet and no boundary edge of the facet meets it."""
+    nx, ny, nz = facet.normal
+    ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
+    cu, cw = 0.5 * (box[0] + box[1]), 0.5 * (box[2] + box[3])
+    on_facet = False
+    for t in range(facet.start, facet.start + facet.count):
+        sides = 0
+        for c in range(3):
+            p = _in_plane(tri, 3 * t + c, ux, uy, uz, wx, wy, wz)
+            q = _in_plane(tri, 3 * t + (c + 1) % 3, ux, uy, uz, wx, wy, wz)
+            if _segment_meets_box(p, q, box) and not _shared(tri, facet, t, c):
+                return False
+            side = (q[0] - p[0]) * (cw - p[1]) - (q[1] - p[1]) * (cu - p[0])
+            sides += 1 if side >= 0.0 else (-1 if side <= 0.0 else 0)
+        on_facet = on_facet or abs(sides) == 3
+    return on_facet
+
+
+@numba.njit(**JIT_FLAGS)
+def _plane_geometry(va, a, ra, crown_a, facet, box, work):
+    """``facet_geometry`` where the features of core ``a`` that can touch lie over the inside of
+    the facet: its contact is that with the facet's plane, n the facet's normal, d the height of
+    the core's lowest vertex, and no GJK. The crowned contact and the patch are taken against
+    one triangle of the plane large enough to hold the core's footprint (``_footprint``)."""
+    nx, ny, nz = facet.normal
+    dx, dy, dz = facet.disp
+    plane = facet.offset + nx * dx + ny * dy + nz * dz
+    ax, ay, az = support(va, a, -nx, -ny, -nz)
+    d = ax * nx + ay * ny + az * nz - plane
+    tol = 4.0 * crown_a[2]
+    ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
+    cu, cw = 0.5 * (box[0] + box[1]), 0.5 * (box[2] + box[3])
+    size = 4.0 * (math.sqrt((box[1] - box[0]) ** 2 + (box[3] - box[2]) ** 2) + ra)
+    big = np.empty((3, 3))  # an equilateral triangle about the footprint, inradius = size / 2
+    for c in range(3):
+        angle = 2.0 * math.pi * c / 3.0
+        pu, pw = cu + size * math.cos(angle), cw + size * math.sin(angle)
+        big[c, 0] = facet.offset * nx + pu * ux + pw * wx
+        big[c, 1] = facet.offset * ny + pu * uy + pw * wy
+        big[c, 2] = facet.offset * nz + pu * uz + pw * wz
+    b = Core(0, 3, IDENTITY, facet.disp)
+    p_a, p_b = (ax, ay, az), (ax - d * nx, ay - d * ny, az - d * nz)
+    crowned, xx, xy, xz, yx, yy, yz, ex, ey, ez = crowned_contact(
+        va, a, crown_a, big, b, NO_CROWN, p_a, p_b, tol, work
+    )
+    delta = ra - crowned
+    if delta <= 0.0:
+        return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, big, b, p_a, p_b, delta, work)
+    cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
+    return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww, True
 
 
 @numba.njit(**JIT_FLAGS)
@@ -121,10 +250,16 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     lo, hi = _extent(va, a, normal[0], normal[1], normal[2])
     if lo - (offset + shift) > ra or (offset + shift) - hi > ra:
         return -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    tol = 4.0 * crown_a[2]
+    if lo > offset + shift:
+        # The features that can touch (at most ra + tol above the lowest vertex) over the inside
+        # of the facet: the facet is a plane for them.
+        box = _footprint(va, a, facet, ra + tol - (lo - offset - shift))
+        if _inside_facet(tri, facet, box):
+            return _plane_geometry(va, a, ra, crown_a, facet, box, work)
     # Each triangle's distance and closest points, computed once for the three passes below. A
     # triangle farther than ra + tol from the ball about the body's centre that holds the core
     # cannot hold the contact (its crowned distance is at least its distance): no GJK for it.
-    tol = 4.0 * crown_a[2]
     core_reach2 = 0.0
     for v in range(a.start, a.start + a.count):
         core_reach2 = max(core_reach2, va[v, 0] ** 2 + va[v, 1] ** 2 + va[v, 2] ** 2)

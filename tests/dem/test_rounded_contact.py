@@ -13,7 +13,7 @@ from dem.convex import place, scratch
 from dem.facets import build_facets
 from dem.polyhedra import Polyhedron
 from dem.quaternion import from_axis_angle, matrix
-from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry
+from dem.rounded_contact import WallFacet, _footprint, _inside_facet, facet_geometry, pair_geometry
 from dem.walls import WallMesh
 
 EYE = np.eye(3)
@@ -48,6 +48,40 @@ def test_a_box_lying_across_the_facet_diagonal_is_one_contact_below_its_centre()
     assert is_face
     # the patch is the core's 36 x 26 mm face: second moments side^2 / 12 per unit area
     assert sorted([s_uu, s_ww]) == pytest.approx(sorted([0.036**2 / 12, 0.026**2 / 12]), rel=1e-6)
+
+
+def l_floor():
+    """An L-shaped floor, one facet of six triangles: the squares (0, 0.1) x (0, 0.1), (0.1, 0.2)
+    x (0, 0.1) and (0, 0.1) x (0.1, 0.2); its inner corner (0.1, 0.1) is reflex."""
+    corners = [[0, 0], [1, 0], [2, 0], [0, 1], [1, 1], [2, 1], [0, 2], [1, 2]]
+    vertices = 0.1 * np.array([[x, y, 0] for x, y in corners])
+    faces = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [3, 4, 7], [3, 7, 6]])
+    facets = build_facets([WallMesh(vertices, faces)])
+    assert facets.n == 1 and facets.tri_count[0] == 6
+    return facets
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "inside"),
+    [
+        (0.05, 0.05, True),  # inside one square, across its diagonal
+        (0.1, 0.05, True),  # across the inner edge of two squares
+        (0.05, 0.1, True),
+        (0.09, 0.09, False),  # a corner of the face over the notch, the centre over the facet
+        (0.05, 0.19, False),  # over the outer edge
+        (0.15, 0.15, False),  # over the notch
+    ],
+)
+def test_a_face_is_over_a_non_convex_facet_only_clear_of_its_boundary(x, y, inside):
+    # The box's lower face (36 x 26 mm core) 2.9 mm above the floor: the facet is a plane for it
+    # (dem.rounded_contact's fast path) only where no boundary edge of the facet meets it.
+    f = l_floor()
+    facet = WallFacet(0, 6, (0.0, 0.0, 0.0), tuple(float(c) for c in f.normal[0]), float(f.offset[0]))
+    core = place(0, 8, EYE, np.array([x, y, 0.0059]))
+
+    box = _footprint(BOX.core, core, facet, BOX.rounding)
+
+    assert _inside_facet(f.tri.reshape(-1, 3), facet, box) == inside
 
 
 def test_a_slightly_tilted_face_is_pressed_where_the_crowned_gap_is_least():
