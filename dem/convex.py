@@ -23,7 +23,7 @@ of their cores:
 A shape travels as its vertex array and a ``Core`` (which rows, and their placement as plain
 numbers: a tuple holding arrays costs numba reference counting on every call, which measured 20 %
 of a GJK query), points and directions as 3-tuples. Pure numba functions; the scratch array
-``work`` (4, MAX_FEATURE, 3) keeps them free of allocation.
+``work`` (6, MAX_FEATURE, 3) keeps them free of allocation.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import numpy as np
 
 from dem.conf import JIT_FLAGS
 
-MAX_FEATURE = 128  # most vertices of one shape on its supporting plane that the patch uses
+MAX_FEATURE = 128  # most vertices of a core (the scratch holds every one's projection)
 _MAX_ITERATIONS = 64
 _REL_EPS = 1e-12
 
@@ -69,7 +69,7 @@ def place(start, count, rot, pos):
 
 def scratch() -> np.ndarray:
     """The work array ``contact_patch`` needs."""
-    return np.zeros((4, MAX_FEATURE, 3))
+    return np.zeros((6, MAX_FEATURE, 3))
 
 
 @numba.njit(**JIT_FLAGS)
@@ -309,30 +309,37 @@ def gjk_distance(va, a, vb, b):
 
 
 @numba.njit(**JIT_FLAGS)
-def _feature(verts, core, n, u, w, sign, tol, out):
-    """Vertices of a shape within tol of its supporting plane in direction sign*n: their
-    projections on (u, w) and their depth ``tol - height above the plane``; returns how many (at
-    most MAX_FEATURE)."""
+def _project(verts, core, n, u, w, sign, out):
+    """Every vertex of a shape in the frame (u, w, sign*n) into out: its projections on u and w
+    and its height along sign*n."""
     start, count, rot, p = core
     r0, r1, r2 = rot
     nx, ny, nz = n
     ux, uy, uz = u
     wx, wy, wz = w
+    for k in range(count):
+        v = start + k
+        x = p[0] + r0[0] * verts[v, 0] + r0[1] * verts[v, 1] + r0[2] * verts[v, 2]
+        y = p[1] + r1[0] * verts[v, 0] + r1[1] * verts[v, 1] + r1[2] * verts[v, 2]
+        z = p[2] + r2[0] * verts[v, 0] + r2[1] * verts[v, 1] + r2[2] * verts[v, 2]
+        out[k, 0] = x * ux + y * uy + z * uz
+        out[k, 1] = x * wx + y * wy + z * wz
+        out[k, 2] = sign * (x * nx + y * ny + z * nz)
+
+
+@numba.njit(**JIT_FLAGS)
+def _feature(proj, count, tol, out):
+    """The projected vertices (``_project``) within tol of their supporting plane, their column 2
+    ``tol - height above the plane``; returns how many (at most MAX_FEATURE)."""
     best = -np.inf
-    for v in range(start, start + count):
-        x = p[0] + r0[0] * verts[v, 0] + r0[1] * verts[v, 1] + r0[2] * verts[v, 2]
-        y = p[1] + r1[0] * verts[v, 0] + r1[1] * verts[v, 1] + r1[2] * verts[v, 2]
-        z = p[2] + r2[0] * verts[v, 0] + r2[1] * verts[v, 1] + r2[2] * verts[v, 2]
-        best = max(best, sign * (x * nx + y * ny + z * nz))
+    for k in range(count):
+        best = max(best, proj[k, 2])
     m = 0
-    for v in range(start, start + count):
-        x = p[0] + r0[0] * verts[v, 0] + r0[1] * verts[v, 1] + r0[2] * verts[v, 2]
-        y = p[1] + r1[0] * verts[v, 0] + r1[1] * verts[v, 1] + r1[2] * verts[v, 2]
-        z = p[2] + r2[0] * verts[v, 0] + r2[1] * verts[v, 1] + r2[2] * verts[v, 2]
-        depth = tol - (best - sign * (x * nx + y * ny + z * nz))
+    for k in range(count):
+        depth = tol - (best - proj[k, 2])
         if depth >= 0.0 and m < out.shape[0]:
-            out[m, 0] = x * ux + y * uy + z * uz
-            out[m, 1] = x * wx + y * wy + z * wz
+            out[m, 0] = proj[k, 0]
+            out[m, 1] = proj[k, 1]
             out[m, 2] = depth
             m += 1
     return m
@@ -511,11 +518,21 @@ def feature_hulls(va, a, vb, b, d, n, tol, work):
     """Projected hulls of the vertices of cores ``a`` and ``b`` (of the vertex arrays va, vb)
     within tol of their supporting planes across the unit normal n (3-tuple, B to A) of cores a
     distance d apart, in ``plane_basis(n)``, column 2 ``tol - height``: A's in work[0], B's in
-    work[1]; returns their sizes and the length under which points merge."""
+    work[1]; returns their sizes and the length under which points merge. Every vertex's
+    projection stays in work[4] and work[5] for ``feature_hulls_again``."""
     ux, uy, uz, wx, wy, wz = plane_basis(n[0], n[1], n[2])
     u, w = (ux, uy, uz), (wx, wy, wz)
-    na = _feature(va, a, n, u, w, -1.0, tol, work[0])
-    nb = _feature(vb, b, n, u, w, 1.0, tol, work[1])
+    _project(va, a, n, u, w, -1.0, work[4])
+    _project(vb, b, n, u, w, 1.0, work[5])
+    return feature_hulls_again(a.count, b.count, d, tol, work)
+
+
+@numba.njit(**JIT_FLAGS)
+def feature_hulls_again(na, nb, d, tol, work):
+    """``feature_hulls`` for another tol, from the projections of the na and nb vertices that the
+    last call left in work[4] and work[5] (same cores, same n): no second pass over the cores."""
+    na = _feature(work[4], na, tol, work[0])
+    nb = _feature(work[5], nb, tol, work[1])
     eps = 1e-9 * d + 1e-12 * (tol + 1.0)
     ha = _hull2(work[0], na, work[2], eps)
     for k in range(ha):
@@ -527,7 +544,7 @@ def feature_hulls(va, a, vb, b, d, n, tol, work):
 
 
 @numba.njit(**JIT_FLAGS)
-def contact_patch(va, a, vb, b, p_a, p_b, tol, work):
+def contact_patch(va, a, vb, b, p_a, p_b, tol, work, again=False):
     """Centre of the contact patch of two separated convex shapes ``a`` and ``b`` (``Core``s of
     the vertex arrays va, vb) whose closest points (from ``gjk_distance``, 3-tuples) are p_a and
     p_b, for the overlap ``tol`` of their rounded surfaces: returns ``(area_load, line_load, cx,
@@ -539,7 +556,9 @@ def contact_patch(va, a, vb, b, p_a, p_b, tol, work):
     vertex is its depth (tol minus its height), linear in between (a Winkler foundation), and c
     is the centre of that pressure: the centroid when two faces are parallel, moving continuously
     to the lower edge as a face tilts by tol over its width, the closest point once one vertex or
-    edge alone is within tol. The loads weight patches of several coplanar triangles."""
+    edge alone is within tol. The loads weight patches of several coplanar triangles. ``again``:
+    the last ``feature_hulls`` in work was for these cores and closest points (as
+    ``dem.crown.crowned_contact``'s), so their projections are reused."""
     ax, ay, az = p_a
     bx, by, bz = p_b
     nx, ny, nz = ax - bx, ay - by, az - bz
@@ -549,7 +568,10 @@ def contact_patch(va, a, vb, b, p_a, p_b, tol, work):
         return 0.0, 0.0, mx, my, mz, 0.0, 0.0, 0.0
     nx, ny, nz = nx / d, ny / d, nz / d
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
-    ha, hb, eps = feature_hulls(va, a, vb, b, d, (nx, ny, nz), tol, work)
+    if again:
+        ha, hb, eps = feature_hulls_again(a.count, b.count, d, tol, work)
+    else:
+        ha, hb, eps = feature_hulls(va, a, vb, b, d, (nx, ny, nz), tol, work)
     # Clip the lower-dimensional feature by the other (a polygon clips anything).
     if hb >= 3:
         m = _clip(work[0], ha, work[1], hb, work[3])

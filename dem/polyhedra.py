@@ -25,6 +25,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
+from dem.convex import MAX_FEATURE
 from dem.frames import smallest_singular_value, transform
 from dem.mesh import MeshError, mass_properties
 
@@ -58,6 +59,13 @@ class Polyhedron:
     com: np.ndarray = field(default_factory=lambda: np.zeros(3))
     axes: np.ndarray = field(default_factory=lambda: np.eye(3))
     name: str = ""
+
+    def __post_init__(self) -> None:
+        if len(self.piece_count) and int(np.max(self.piece_count)) > MAX_FEATURE:
+            raise PolyhedronError(
+                f"a piece has {int(np.max(self.piece_count))} core vertices, more than the contact "
+                f"kernels' {MAX_FEATURE}; simplify it (make_polyhedron keeps {MAX_CORE_VERTICES})"
+            )
 
     @property
     def n_pieces(self) -> int:

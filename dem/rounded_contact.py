@@ -192,7 +192,7 @@ def _plane_geometry(va, a, ra, crown_a, facet, box, work):
     delta = ra - crowned
     if delta <= 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
-    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, big, b, p_a, p_b, delta, work)
+    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, big, b, p_a, p_b, delta, work, True)
     cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww, True
 
@@ -230,7 +230,7 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, work):
     delta = reach - crowned
     if delta <= 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, vb, b, p_a, p_b, delta, work)
+    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, vb, b, p_a, p_b, delta, work, True)
     cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww
 
