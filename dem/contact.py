@@ -226,7 +226,7 @@ def contact_share(delta, m, sum_d2):
     return w * (3.0 - 2.0 * m / delta), w
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def pair_normal_force(overlap, rate, k_n, c_n):
     """F = K delta + C d(delta)/dt of a pair in its overlap coordinate, never attractive."""
     f = k_n * overlap + c_n * rate
@@ -244,7 +244,7 @@ class PairLaw(NamedTuple):
     mu: float  # friction coefficient of the pair
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def sphere_contact_force(n, f_n, f_pair, v, weight, law, hist, h, hist_dt):
     """Force on the first partner of one sphere contact; returns (fx, fy, fz).
 

@@ -86,7 +86,7 @@ def build_facets(walls: list[WallMesh]) -> Facets:
     )
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def closest_point_on_triangle(px, py, pz, tri):
     """Closest point of triangle ``tri`` (3, 3) to p (Ericson, Real-Time Collision Detection 5.1.5)."""
     ax, ay, az = tri[0, 0], tri[0, 1], tri[0, 2]

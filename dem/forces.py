@@ -68,13 +68,13 @@ def pair_law(k_n, m_eff, row):
     )
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _group_law(grp_law, g):
     """The ``PairLaw`` stored for body pair group g by ``body_pair_laws``."""
     return PairLaw(grp_law[g, G_KN], grp_law[g, G_CN], grp_law[g, G_KT], grp_law[g, G_CT], grp_law[g, G_MU])
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _point_velocity(vel, omega, b, rx, ry, rz):
     """Velocity of body b's material point at lever r from its centre: v + omega x r."""
     return (
@@ -84,7 +84,7 @@ def _point_velocity(vel, omega, b, rx, ry, rz):
     )
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _push(force, torque, b, fx, fy, fz, rx, ry, rz):
     """Adds the force f, applied at lever r from body b's centre, and its torque r x f."""
     force[b, 0] += fx
@@ -127,7 +127,7 @@ def _add_sums(sums, g, delta, rate):
     sums[g, 5] += 1.0
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _contact_normal_force(sums, g, single, delta, v, n, law):
     """(f_n, N, w) of one contact of group g: its normal force, its pair's net normal force (the Coulomb
     cap's) and its share of the tangential law. A contact alone in its group (``single``, or the only one
@@ -499,35 +499,40 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                 wp_hist[a, 0] = wp_hist[a, 1] = wp_hist[a, 2] = 0.0
         p = q_end
 
+    # The law's constants depend on the body's and the wall's materials and the body's size and
+    # mass only: computed when these change from one contact to the next (two square roots).
+    law_mb = law_mw = -1
+    law_d = law_m = -1.0
+    law = PairLaw(0.0, 0.0, 0.0, 0.0, 0.0)
     p = 0
     while p < n_wp:
         b = sbody[wp_i[p]]
         q_end = p
         while q_end < n_wp and sbody[wp_i[q_end]] == b:
             q_end += 1
-        for a in range(p, q_end):
-            for k in range(N_SUMS):
-                facet_sum[wp_f[a], k] = 0.0
-        for a in range(p, q_end):
-            if wp_keep[a]:
-                nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
-                w_v = wall_vel[f_wall[wp_f[a]]]
-                rate = _wall_approach_rate(bodies, b, w_v, wp_cp[a], wp_delta[a], (nx, ny, nz))
-                _add_sums(facet_sum, wp_f[a], wp_delta[a], rate)
-        # The law's constants depend on the body and the wall only: computed once per run of
-        # contacts with the same wall.
-        law_wall = -1
-        law = PairLaw(0.0, 0.0, 0.0, 0.0, 0.0)
+        # One sphere's pairs have distinct facets: each facet's group is that one contact, which
+        # carries the whole law (``_contact_normal_force``), so its sums are not needed.
+        single = wp_i[p] == wp_i[q_end - 1]
+        if not single:
+            for a in range(p, q_end):
+                for k in range(N_SUMS):
+                    facet_sum[wp_f[a], k] = 0.0
+            for a in range(p, q_end):
+                if wp_keep[a]:
+                    nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
+                    w_v = wall_vel[f_wall[wp_f[a]]]
+                    rate = _wall_approach_rate(bodies, b, w_v, wp_cp[a], wp_delta[a], (nx, ny, nz))
+                    _add_sums(facet_sum, wp_f[a], wp_delta[a], rate)
         for a in range(p, q_end):
             if not wp_keep[a]:
                 continue
             f = wp_f[a]
             w = f_wall[f]
-            if w != law_wall:
-                mb, mw = bodies.material[b], wall_mat[w]
+            mb, mw = bodies.material[b], wall_mat[w]
+            if mb != law_mb or mw != law_mw or diameter[b] != law_d or mass[b] != law_m:
                 e_b, e_w = material.E[mb], material.E[mw]
                 law = pair_law(diameter[b] * e_b * e_w / (e_b + e_w), mass[b], material.law[mb, mw])
-                law_wall = w
+                law_mb, law_mw, law_d, law_m = mb, mw, diameter[b], mass[b]
             delta = wp_delta[a]
             nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
             cx = wp_cp[a, 0] - 0.5 * delta * nx
@@ -536,7 +541,7 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
             rax, ray, raz = cx - pos[b, 0], cy - pos[b, 1], cz - pos[b, 2]
             vbx, vby, vbz = _point_velocity(vel, omega, b, rax, ray, raz)
             v = (vbx - wall_vel[w, 0], vby - wall_vel[w, 1], vbz - wall_vel[w, 2])
-            f_n, f_pair, weight = _contact_normal_force(facet_sum, f, False, delta, v, (nx, ny, nz), law)
+            f_n, f_pair, weight = _contact_normal_force(facet_sum, f, single, delta, v, (nx, ny, nz), law)
             fx, fy, fz = sphere_contact_force((nx, ny, nz), f_n, f_pair, v, weight, law, wp_hist, a, hist_dt)
             _push(force, torque, b, fx, fy, fz, rax, ray, raz)
             if spheres.core_count[wp_i[a]] > 0:

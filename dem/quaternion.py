@@ -29,7 +29,7 @@ _S3, _S5, _S7 = -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0
 _C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _sinc_cos_series(x2):
     """(sin(x) / x, cos(x)) for x * x = x2 < _SERIES_HALF_ANGLE**2."""
     return 1.0 + x2 * (_S3 + x2 * (_S5 + x2 * _S7)), 1.0 + x2 * (_C2 + x2 * (_C4 + x2 * (_C6 + x2 * _C8)))
@@ -45,7 +45,7 @@ def half_angle_sin_cos(angle):
     return math.sin(x), math.cos(x)
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _renormalise(q):
     """q / |q| for a q within rounding of unit length: one Newton step for 1 / sqrt(|q|^2) from 1
     (its error is of order (|q|^2 - 1)^2), no square root or division."""
@@ -56,7 +56,7 @@ def _renormalise(q):
     q[3] *= scale
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def to_matrix(q, out):
     """Rotation matrix of the unit quaternion q into out (3, 3)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
@@ -103,7 +103,7 @@ def _turn_about_body_axis(q, lb, axis, angle):
     lb[j] = -sa * li + ca * lj
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def free_rotor_step(q, lb, inertia, h):
     """Advance orientation q by h with body-frame angular momentum lb (both updated in place)."""
     _turn_about_body_axis(q, lb, 0, 0.5 * h * lb[0] / inertia[0])
@@ -114,7 +114,7 @@ def free_rotor_step(q, lb, inertia, h):
     _renormalise(q)
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def isotropic_rotor_step(q, angmom, inertia, h):
     """Advance orientation q by h for a body with equal principal moments ``inertia`` and
     world-frame angular momentum ``angmom``: q <- exp(|L| h / (2 I) L / |L|) (x) q, exact."""
