@@ -9,8 +9,8 @@ simulations does it need, and does its recommendation reproduce the experiment o
    paper's GA, then random) at the same budget, batch sizes and study seed; the studies' own
    end-of-study validation is off (``validation.seeds = 0``), so the budget is all search.
 3. Re-simulate each method's first matching set and its recommendation on the fresh seeds and
-   judge them with the studies' own rule (``optimizer/validation.py``: a permutation test of the
-   study's distance, level 0.1), with the Wasserstein-1 distance (W1) beside the truth's own W1
+   judge them with the studies' own rule (``optimizer/validation.py``: a permutation test at
+   level 0.1), with the Wasserstein-1 distance (W1) beside the truth's own W1
    on the same fresh seeds (the best any parameter set can be expected to do).
 
 Prints, per method: simulations until the first match and until the first validated match

@@ -13,7 +13,11 @@ corrupt it, and this executor does kill processes:
 - priority: a new process lowers its CPU priority by ``nice`` (``worker/priority.py``) first, so
   that the service it runs under stays responsive while trials compute;
 - warm-up: a new process runs ``worker.warmup.warm_up`` before its first trial, so no trial's T
-  includes the kernels' compile (its first trial's hard deadline allows for it);
+  includes the kernels' compile, and says when it is done: the first trial's hard deadline runs
+  from then, not from when the trial was handed over. A cold compile on a loaded machine took
+  over 270 s (two workers of the README's quick study, 23 Nov); a fixed allowance of 120 s
+  killed both first trials, and every replacement process started the compile again. A warm-up
+  still running after ``WARMUP_LIMIT_S`` is taken for a hung process;
 - a process that dies (segfault in a kernel, out of memory) reports its trial as ``error`` with
   the exit code, and is replaced.
 
@@ -33,7 +37,7 @@ import os
 import signal
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from multiprocessing import connection, get_context
 from pathlib import Path
@@ -43,20 +47,25 @@ from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import TrialOutcome, TrialSpec
 from worker.jobs import longest_first
 from worker.priority import DEFAULT_NICE, lower_priority
+from worker.warmup import warm_up
 
 logger = logging.getLogger(__name__)
 
 # How long a worker may overrun its trial's deadline before it is killed: the feeder checks its
 # deadline between chunks of simulated time, so a healthy run stops well within this.
 DEFAULT_GRACE_S = 30.0
-# A new process warms its kernels (``worker/warmup.py``) before it reads its first trial, which
-# waits in the pipe meanwhile: that trial's hard deadline allows for it.
-WARMUP_ALLOWANCE_S = 120.0
+# Longest a new process may take to warm its kernels (``worker/warmup.py``) before it is taken
+# for hung and its first trial ends as ``timeout``: a cold compile under load takes minutes.
+WARMUP_LIMIT_S = 1800.0
+# What a process sends when its warm-up is done (a result is ``(trial_id, result)``).
+READY = None
 # Longest single wait, so that hard deadlines are checked even when no result arrives.
 MAX_WAIT_S = 0.5
 
 
-def _serve(conn, log_level: int, snapshot_root: Path | None, data_dir: Path | None, nice: int) -> None:
+def _serve(
+    conn, log_level: int, snapshot_root: Path | None, data_dir: Path | None, nice: int, warm_up: Callable
+) -> None:
     """A worker process: run the specs it receives until told to stop (None) or its pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     lower_priority(nice)
@@ -66,9 +75,8 @@ def _serve(conn, log_level: int, snapshot_root: Path | None, data_dir: Path | No
         level=log_level, format="%(asctime)s %(levelname)-7s %(name)s[%(process)d]: %(message)s"
     )
     from worker.jobs import run_trial
-    from worker.warmup import warm_up
 
-    warm_up()  # before the first trial, so that no trial's T includes the compile
+    conn.send((READY, warm_up()))  # before the first trial, so that no trial's T includes the compile
     while True:
         try:
             spec = conn.recv()
@@ -85,17 +93,21 @@ class _Slot:
     conn: Any
     spec: TrialSpec | None = None
     started: float = 0.0
-    trials: int = 0  # trials handed to this process; the first waits for its warm-up
+    born: float = 0.0
+    warm: bool = False  # its warm-up is done; until then its first trial waits in the pipe
 
     @property
     def name(self) -> str:
         return f"local-{self.process.pid}"
 
     def hard_deadline(self, grace_s: float) -> float | None:
-        if self.spec is None or self.spec.timeout_s is None:
+        if self.spec is None:
             return None
-        warming = WARMUP_ALLOWANCE_S if self.trials == 1 else 0.0
-        return self.started + self.spec.timeout_s + grace_s + warming
+        if not self.warm:
+            return self.born + WARMUP_LIMIT_S
+        if self.spec.timeout_s is None:
+            return None
+        return self.started + self.spec.timeout_s + grace_s
 
 
 class LocalPoolExecutor:
@@ -103,13 +115,14 @@ class LocalPoolExecutor:
 
     def __init__(
         self, workers: int = 0, *, grace_s: float = DEFAULT_GRACE_S, snapshot_root: Path | None = None,
-        data_dir: Path | None = None, nice: int = DEFAULT_NICE,
+        data_dir: Path | None = None, nice: int = DEFAULT_NICE, warm_up: Callable = warm_up,
     ):
         self.size = workers or os.cpu_count() or 1
         self.nice = nice
         self.snapshot_root = snapshot_root
         self.data_dir = data_dir
         self.grace_s = grace_s
+        self.warm_up = warm_up  # a module-level function: ``spawn`` pickles it by name
         self._context = get_context("spawn")
         self._slots: list[_Slot] = []
         self._waiting: deque[TrialSpec] = deque()
@@ -189,7 +202,6 @@ class LocalPoolExecutor:
                 slot = self._start()
             spec = self._waiting.popleft()
             slot.spec, slot.started = spec, time.monotonic()
-            slot.trials += 1
             slot.conn.send(asdict(spec))
 
     def _start(self) -> _Slot:
@@ -197,14 +209,19 @@ class LocalPoolExecutor:
         process = self._context.Process(
             target=_serve,
             args=(
-                child, logging.getLogger().getEffectiveLevel(), self.snapshot_root, self.data_dir, self.nice
+                child,
+                logging.getLogger().getEffectiveLevel(),
+                self.snapshot_root,
+                self.data_dir,
+                self.nice,
+                self.warm_up,
             ),
             daemon=True,
             name="demcal-local-worker",
         )
         process.start()
         child.close()
-        slot = _Slot(process, parent)
+        slot = _Slot(process, parent, born=time.monotonic())
         self._slots.append(slot)
         return slot
 
@@ -228,6 +245,10 @@ class LocalPoolExecutor:
                 return self._failed(
                     slot, SimulationStatus.ERROR, f"worker process died (exit code {slot.process.exitcode})"
                 )
+            if trial is READY:
+                logger.info("%s: kernels warm after %.1f s", slot.name, result)
+                slot.warm, slot.started = True, time.monotonic()
+                return None
             slot.spec = None
             return TrialOutcome(trial, SimulationResult.model_validate(result), worker=slot.name)
         if not slot.process.is_alive():
@@ -236,11 +257,11 @@ class LocalPoolExecutor:
             )
         deadline = slot.hard_deadline(self.grace_s)
         if deadline is not None and time.monotonic() > deadline:
-            return self._failed(
-                slot,
-                SimulationStatus.TIMEOUT,
-                f"killed: still running {self.grace_s:g} s after its {spec.timeout_s:g} s limit",
-            )
+            if not slot.warm:
+                message = f"killed: its worker was still warming its kernels after {WARMUP_LIMIT_S:g} s"
+            else:
+                message = f"killed: still running {self.grace_s:g} s after its {spec.timeout_s:g} s limit"
+            return self._failed(slot, SimulationStatus.TIMEOUT, message)
         return None
 
     def _failed(self, slot: _Slot, status: SimulationStatus, message: str) -> TrialOutcome:

@@ -281,7 +281,12 @@ def _report(console, store, study_id: str, results: Path) -> None:
     console.print(table)
     _report_failures(console, summary["failures"], summary.get("responses_measured", "N_t"))
     recommendation = summary["recommendation"]
-    if recommendation is None:
+    if recommendation is None and summary["failures"]["total"] == summary["simulations"]:
+        console.print(
+            f"[yellow]No simulation measured anything[/] ({summary['failures']['text']}): nothing to "
+            "recommend; the table of failures above says what to change."
+        )
+    elif recommendation is None:
         console.print(
             f"[yellow]No parameter set reproduced the experiments (f1 within {summary['tolerance']:g})[/] "
             f"(best f1 {summary['best_f1']}); widen the bounds, add generations or replicates."
@@ -344,12 +349,16 @@ def _report_progress(console, progress: dict, identified: dict) -> None:
     """Where the search got to (hypervolume, best f1, best validated f1 at the last batch) and
     which parameters the experiment pins down."""
     if progress["points"]:
-        last = progress["points"][-1]
+        last, reference = progress["points"][-1], progress["reference"]
         hv = "-" if last["hypervolume"] is None else f"{last['hypervolume']:.3f}"
         validated = last["best_validated_f1"]
+        box = (
+            "no reference point: no run of the first batch measured"
+            if reference is None
+            else f"reference f1 = {reference['f1']:g}, f2 = {reference['f2']:.3g}"
+        )
         console.print(
-            f"progress after {last['simulations']} simulations: hypervolume {hv} "
-            f"(reference f1 = {progress['reference']['f1']:g}, f2 = {progress['reference']['f2']:.3g}), "
+            f"progress after {last['simulations']} simulations: hypervolume {hv} ({box}), "
             f"best f1 {_optional(last['best_f1'])}, best validated f1 {_optional(validated)}",
             soft_wrap=True,
         )

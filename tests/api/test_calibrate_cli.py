@@ -149,6 +149,24 @@ def test_tiny_study_runs_and_writes_its_results(tmp_path):
     assert "Pareto front" in output
 
 
+def test_a_study_whose_every_run_fails_ends_with_the_failures_and_no_recommendation(tmp_path):
+    """Every run ends ``timeout`` (a limit no simulation can meet): the CLI prints the failure
+    table and says nothing was measured, exit 0, where its progress line raised a TypeError (no
+    hypervolume reference point without a measured run)."""
+    path = write_study(tmp_path)
+    path.write_text(path.read_text().replace("trial_timeout_s = 120", "trial_timeout_s = 0.001"))
+
+    process = demcal(["calibrate", "study.toml", "--workers", "2", "--results", "out"], tmp_path)
+    output = finish(process, 300)
+
+    assert process.returncode == 0, output
+    assert "Traceback" not in output
+    assert "No simulation measured anything (failed: 4 (timeout 4))" in " ".join(output.split())
+    [folder] = (tmp_path / "out").iterdir()
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["recommendation"] is None and summary["failures"]["total"] == 4
+
+
 def by_individual(store, study_id: str) -> dict[tuple[int, int, int], tuple]:
     """A study's trials keyed by (generation, individual, replicate): spec and result."""
     fields = DETERMINISTIC_RESULT_FIELDS

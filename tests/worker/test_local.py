@@ -125,3 +125,47 @@ def test_a_fresh_process_warms_its_kernels_so_its_first_T_is_comparable():
     assert first.status is second.status is SimulationStatus.OK
     assert first.steps == second.steps
     assert first.wall_time_s < 2.0 * second.wall_time_s + 0.5
+
+
+def slow_warm_up() -> float:
+    """The real warm-up, made as slow as a cold compile on a loaded machine, in miniature."""
+    from worker.warmup import warm_up
+
+    time.sleep(SLOW_WARM_UP_S)
+    return SLOW_WARM_UP_S + warm_up()
+
+
+def hung_warm_up() -> float:
+    time.sleep(3600)
+    return 3600.0
+
+
+SLOW_WARM_UP_S = 10.0
+
+
+def test_a_first_trial_is_not_timed_out_while_its_worker_warms_its_kernels():
+    """The trial's 5 s limit runs from the end of the warm-up (over 10 s here), not from when the
+    trial was handed to the process: with the clock started at hand-over it was killed at 5.5 s."""
+    executor = LocalPoolExecutor(1, grace_s=0.5, warm_up=slow_warm_up)
+    try:
+        executor.submit([spec("first", timeout_s=5.0)])
+        [outcome] = collect(executor, 1, limit_s=120)
+    finally:
+        executor.close()
+
+    assert outcome.result.status is SimulationStatus.OK, outcome.result.message
+
+
+def test_a_worker_whose_warm_up_hangs_ends_its_trial_as_timeout(monkeypatch):
+    monkeypatch.setattr("worker.local.WARMUP_LIMIT_S", 3.0)
+    executor = LocalPoolExecutor(1, grace_s=0.5, warm_up=hung_warm_up)
+    try:
+        started = time.monotonic()
+        executor.submit([spec("stuck")])  # no limit of its own: the warm-up limit still holds
+        [outcome] = collect(executor, 1, limit_s=60)
+    finally:
+        executor.close()
+
+    assert outcome.result.status is SimulationStatus.TIMEOUT
+    assert "warming" in outcome.result.message
+    assert time.monotonic() - started < 30

@@ -261,7 +261,8 @@ function renderValidation(rows, measured) {
     `Experiment: ${responseText(responses[0])} ${measured.join(", ")} (median ${fmt(median)}). ` +
     "Each candidate re-simulated on " +
     "seeds never used in the search; validated when every fresh run measured and the fresh runs " +
-    "cannot be told apart from the experiment (a permutation test at the 90 % level).";
+    "cannot be told apart from the experiment (a permutation test at the 90 % level; " +
+    "with few measured values it has little power: read W1 and the median too).";
   headerHtml(document.getElementById("validation-response"), "", "fresh ");
   document.querySelector("#validation-table tbody").replaceChildren(...rows.map((row) => el("tr",
     { "data-individual": row.individual },
