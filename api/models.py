@@ -114,8 +114,18 @@ class StudyRow(Base):
     # The lease of the process driving the study (``api/store/leases.py``): who, and until when.
     driver: Mapped[str | None] = mapped_column(sa.String(200))
     driver_until: Mapped[datetime | None]
-    # The last change number given to a write of its trials (``StoreBase._change_numbers``).
-    trial_changes: Mapped[int] = mapped_column(sa.BigInteger, default=0, server_default="0")
+    # The study's change counter: every write to its trials (``StoreBase._change_numbers``) and
+    # to this row (the onupdate below, unless a write keeps the version: ``KEEP_VERSION``) takes
+    # the next number, in commit order (the row stays locked until the commit).
+    trial_changes: Mapped[int] = mapped_column(
+        sa.BigInteger, default=0, server_default="0", onupdate=sa.text("trial_changes + 1")
+    )
+    # The number of this row's own last change (status, generation, ranking, new trials): the
+    # version of the views made from the row (``api/services/views.py``). In an UPDATE every
+    # right-hand side reads the row as it was, so it is the counter's new value.
+    change_number: Mapped[int] = mapped_column(
+        sa.BigInteger, default=0, server_default="0", onupdate=sa.text("trial_changes + 1")
+    )
 
     trials: Mapped[list[TrialRow]] = relationship(
         back_populates="study", cascade="all, delete-orphan", passive_deletes=True, lazy="raise"

@@ -3,7 +3,6 @@ front, per-generation summary, recommendation, exports). Thin handlers over ``ap
 
 from __future__ import annotations
 
-import hashlib
 import math
 from typing import Annotated
 
@@ -21,18 +20,18 @@ from api.schemas import (
     StudyRead,
 )
 from api.services import progress, studies, trials
+from api.services.views import Served, etag
 from optimizer.protocols import StudyStatus
 from optimizer.study import StudyDefinition
 
 router = APIRouter(prefix="/api/v1/studies", tags=["studies"])
 
 
-def cached_json(
-    request: Request, body: bytes, current: bool = True, retry_after_s: float | None = None
-) -> Response:
-    """A polled view's JSON with an ETag (its content's hash) and ``Cache-Control: no-cache``, so
-    that a browser asks again each time with ``If-None-Match`` and an unchanged view comes back as
-    an empty 304 instead of its bytes (the dashboard's fetch does this by itself).
+def cached_json(request: Request, served: Served) -> Response:
+    """A polled view's JSON with an ETag (its version, ``views.etag``) and ``Cache-Control:
+    no-cache``, so that a browser asks again each time with ``If-None-Match`` and a view it holds
+    at the current version comes back as an empty 304 (the dashboard's fetch does this by itself),
+    answered from the version alone.
 
     ``X-Demcal-View`` says whether the view is of the study's current version or a stale one
     served while the current one builds (progress, identifiability): the dashboard asks for a
@@ -40,13 +39,21 @@ def cached_json(
     304s too, because a cache keeps a stored header the 304 does not replace. A stale view whose
     next build rests (identifiability) also says in ``Retry-After`` how many seconds pass at least
     before a newer version can be ready: the dashboard does not ask for it again before."""
-    tag = f'"{hashlib.blake2b(body, digest_size=16).hexdigest()}"'
-    headers = {"ETag": tag, "Cache-Control": "no-cache", "X-Demcal-View": "current" if current else "stale"}
-    if not current and retry_after_s is not None:
-        headers["Retry-After"] = str(max(1, math.ceil(retry_after_s)))
+    tag = etag(served.version)
+    headers = {
+        "ETag": tag, "Cache-Control": "no-cache", "X-Demcal-View": "current" if served.current else "stale",
+    }
+    if not served.current and served.retry_after_s is not None:
+        headers["Retry-After"] = str(max(1, math.ceil(served.retry_after_s)))
     if tag in request.headers.get("if-none-match", ""):
         return Response(status_code=status.HTTP_304_NOT_MODIFIED, headers=headers)
-    return Response(body, media_type="application/json", headers=headers)
+    return Response(served.body, media_type="application/json", headers=headers)
+
+
+def held(request: Request) -> str | None:
+    """The ETags the client holds (``If-None-Match``)."""
+    return request.headers.get("if-none-match")
+
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=StudyRead)
 def create_study(definition: StudyDefinition, principal: ApiKeyDep, store: StoreDep, settings: SettingsDep):
@@ -70,7 +77,7 @@ def get_study(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """A study with its progress (trials done / total, generation) and best trial so far."""
-    return cached_json(request, studies.study_json(store, views, study_id, principal))
+    return cached_json(request, studies.study_json(store, views, study_id, principal, held(request)))
 
 
 @router.post("/{study_id}/pause", response_model=StudyRead)
@@ -98,7 +105,7 @@ def pareto_front(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """The current Pareto front (f1 = |N_t - target|, f2 = computation time), best f1 first."""
-    return cached_json(request, trials.pareto_front_json(store, views, study_id, principal))
+    return cached_json(request, trials.pareto_front_json(store, views, study_id, principal, held(request)))
 
 
 @router.get("/{study_id}/generations", response_model=list[GenerationSummary])
@@ -112,8 +119,7 @@ def study_progress(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """Hypervolume, best f1 and best validated f1 against simulations, one point per completed batch."""
-    served = progress.progress_json(store, views, study_id, principal)
-    return cached_json(request, served.body, served.current)
+    return cached_json(request, progress.progress_json(store, views, study_id, principal, held(request)))
 
 
 @router.get("/{study_id}/identifiability", response_model=IdentifiabilityRead)
@@ -121,8 +127,8 @@ def identifiability(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """Which searched parameters the experiment pins down, from the spread of the matching sets."""
-    served = progress.identifiability_json(store, views, study_id, principal)
-    return cached_json(request, served.body, served.current, served.retry_after_s)
+    served = progress.identifiability_json(store, views, study_id, principal, held(request))
+    return cached_json(request, served)
 
 
 @router.get("/{study_id}/recommendation", response_model=RecommendationRead)
@@ -130,7 +136,7 @@ def recommendation(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """The recommended parameter set and every other set that matches the experiment as well."""
-    return cached_json(request, trials.recommendation_json(store, views, study_id, principal))
+    return cached_json(request, trials.recommendation_json(store, views, study_id, principal, held(request)))
 
 
 @router.get(

@@ -37,7 +37,9 @@ class _Folded:
         self.tracker: ProgressTracker | None = None
 
 
-def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal) -> Served:
+def progress_json(
+    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, held: str | None = None
+) -> Served:
     study = store.study_version(study_id, principal.visible_to)
 
     def build() -> bytes:
@@ -54,12 +56,11 @@ def progress_json(store: SqlStore, views: StudyViewCache, study_id: str, princip
             progress = tracker.progress(validation)
         return StudyProgressRead(study_id=study_id, **progress.as_json()).model_dump_json().encode()
 
-    version = (study.updated_at, study.generation)
-    return views.serve("progress", study_id, version, build, stale_ok=True)
+    return views.serve("progress", study_id, study.change_number, build, stale_ok=True, held=held)
 
 
 def identifiability_json(
-    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal
+    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, held: str | None = None
 ) -> Served:
     study = store.study_version(study_id, principal.visible_to)
     # Once per completed batch (and status), not per change of the study row (a batch queued,
@@ -68,7 +69,9 @@ def identifiability_json(
     # so it rests IDENTIFIABILITY_REST times as long before the next (``views``).
     version = (study.generation, study.status)
     build = lambda: in_child(_identifiability, store, study_id)  # noqa: E731 - one line, one use
-    return views.serve("identifiability", study_id, version, build, stale_ok=True, rest=IDENTIFIABILITY_REST)
+    return views.serve(
+        "identifiability", study_id, version, build, stale_ok=True, rest=IDENTIFIABILITY_REST, held=held
+    )
 
 
 def _identifiability(store: SqlStore, study_id: str) -> bytes:

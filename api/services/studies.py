@@ -22,7 +22,7 @@ from api.services.generations import latest_generation
 from api.services.scenario_paths import confine_paths
 from api.services.shapes import attach_uploaded_shapes
 from api.services.trials import trial_read
-from api.services.views import StudyViewCache
+from api.services.views import Served, StudyViewCache
 from api.store import SqlStore
 from optimizer.objectives import f1_rule
 from optimizer.outcomes import failures_from_counts
@@ -126,17 +126,17 @@ def get_study(
     )
 
 
-def study_json(store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal) -> bytes:
-    """``get_study`` as JSON, built once per version of the study and of its trials: the read
-    every open dashboard polls, while results change it a few times a second at most. The
-    trials' version is their newest ``updated_at``: a write stamped no later than the newest one
-    already there (the same clock tick, another process's slower clock) shows at the next write;
-    a study's last result is followed by writes to the study row, so a finished study's counts
-    are final."""
+def study_json(
+    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, held: str | None = None
+) -> Served:
+    """``get_study`` as JSON, built once per version of the study and of its trials (the study's
+    change counter: every write to either takes the next number): the read every open dashboard
+    polls, while results change it a few times a second at most. ``held``: the client's
+    ``If-None-Match`` (``StudyViewCache.serve``)."""
     version = store.study_version(study_id, principal.visible_to)
-    return views.get_or_build(
-        "study", study_id, (version.updated_at, version.generation, version.trials_changed_at),
-        lambda: get_study(store, study_id, principal, views).model_dump_json().encode(),
+    return views.serve(
+        "study", study_id, version.trial_changes,
+        lambda: get_study(store, study_id, principal, views).model_dump_json().encode(), held=held,
     )
 
 
@@ -145,10 +145,8 @@ def _best_trial(store: SqlStore, row, views: StudyViewCache | None) -> TrialRead
         best = store.best_trial(row.id)
         return trial_read(best).model_dump_json().encode() if best is not None else b"null"
 
-    if views is None:
-        body = build()
-    else:  # the best trial is ranked by f1/f2, which only save_generation writes (it bumps the row)
-        body = views.get_or_build("best", row.id, (row.updated_at, row.generation), build)
+    # The best trial is ranked by f1/f2, which only save_generation writes (it bumps the row).
+    body = build() if views is None else views.get_or_build("best", row.id, row.change_number, build)
     return None if body == b"null" else TrialRead.model_validate_json(body)
 
 

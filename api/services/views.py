@@ -30,6 +30,13 @@ that rests, when a newer version can be ready at the earliest (the rest left plu
 duration: ``Retry-After``): a page asking every poll for a view that rests was a third of the
 requests of 50 polling dashboards (session 6).
 
+A view's ETag is its version (``etag``), a number the database hands out (the study's change
+numbers, ``api/models.py``), not a hash of its bytes: a client that holds the current version
+(``If-None-Match``) is answered before the cache is even looked at (``serve(..., held=)``), by any
+server process. Under 50 polling dashboards with two DEM workers, the study read that answered
+that 304 still found its view under the cache's lock, hashed its bytes (a recommendation is
+~100 kB) and, after each trial write, rebuilt it first (benchmarks/README.md, session 7).
+
 What it must not do: decide what a view contains (``api/services/trials.py`` does).
 """
 
@@ -58,6 +65,15 @@ class Served:
     body: bytes
     current: bool
     retry_after_s: float | None = None
+    version: Hashable = None  # of the body: its ETag (``etag``)
+
+
+def etag(version: Hashable) -> str:
+    """The ETag of a view's ``version`` (a number, or a tuple of them). Weak: two server processes
+    may build one version at moments a little apart, and their bytes need not be equal; both are
+    of that version, which is what a conditional GET asks."""
+    parts = version if isinstance(version, tuple) else (version,)
+    return 'W/"' + "-".join(str(part) for part in parts) + '"'
 
 
 class StudyViewCache:
@@ -81,17 +97,21 @@ class StudyViewCache:
 
     def serve(
         self, view: str, study_id: str, version: Hashable, build: Callable[[], bytes], stale_ok: bool = False,
-        rest: float = 0.0,
+        rest: float = 0.0, held: str | None = None,
     ) -> Served:
         """The view at ``version``: cached, or built now (requests for one version wait for one
         build); with ``stale_ok`` and an older version cached, that one, while the asked version
-        builds in the background, ``rest`` times the previous build's duration after it ended."""
+        builds in the background, ``rest`` times the previous build's duration after it ended.
+        ``held``, a client's ``If-None-Match``: if it names ``version``, no view at all (an empty
+        body: the client has it, the answer is a 304)."""
+        if held is not None and etag(version) in held:
+            return Served(b"", True, version=version)
         key = (view, study_id)
         with self._lock:
             entry = self._entries.get(key)
             if entry is not None and entry[0] == version:
                 self._entries.move_to_end(key)
-                return Served(entry[1], True)
+                return Served(entry[1], True, version=version)
             if stale_ok and entry is not None:
                 now = time.monotonic()
                 resting_s = self._resting.get(key, 0.0) - now
@@ -109,10 +129,10 @@ class StudyViewCache:
                 threading.Thread(
                     target=self._refresh, args=(key, version, build, rest), name=f"view-{view}", daemon=True
                 ).start()
-            return Served(entry[1], False, retry_after_s)
+            return Served(entry[1], False, retry_after_s, entry[0])
         if mine:
             self._build(key, version, build, pending)
-        return Served(pending.result(), True)
+        return Served(pending.result(), True, version=version)
 
     def kept(self, view: str, study_id: str, make: Callable[[], T]) -> T:
         """The object ``view`` keeps for ``study_id`` between builds (made on first use); past

@@ -15,6 +15,12 @@ from dem.result import SimulationResult
 from optimizer.protocols import TrialRecord, TrialSpec, TrialState
 
 ALL_OWNERS = None  # ``visible_to=ALL_OWNERS``: an admin's view, no owner filter
+# The values of an UPDATE of a study row that is no change of what clients see (a lease, the
+# stored warnings, a trial write's number): its ``updated_at`` and its change number stay.
+KEEP_VERSION = {
+    "updated_at": StudyRow.updated_at, "trial_changes": StudyRow.trial_changes,
+    "change_number": StudyRow.change_number,
+}
 
 
 def new_id(prefix: str) -> str:
@@ -54,7 +60,7 @@ class StoreBase:
             numbers[study_id] = s.execute(
                 sa.update(StudyRow)
                 .where(StudyRow.id == study_id)
-                .values(trial_changes=StudyRow.trial_changes + 1, updated_at=StudyRow.updated_at)
+                .values(KEEP_VERSION | {"trial_changes": StudyRow.trial_changes + 1})
                 .returning(StudyRow.trial_changes)
                 .execution_options(synchronize_session=False)
             ).scalar_one_or_none() or 0

@@ -24,10 +24,9 @@ from datetime import datetime, timedelta
 import sqlalchemy as sa
 
 from api.models import StudyRow, utcnow
+from api.store.base import KEEP_VERSION  # a lease is no change of the study
 
 LEASE_TTL_S = 30.0
-# A lease is no change of the study: its ``updated_at`` (which versions cached views) stays.
-KEEP_VERSION = {"updated_at": StudyRow.updated_at}
 
 
 def owner_id() -> str:

@@ -12,7 +12,7 @@ from sqlalchemy.orm import undefer
 
 from api.errors import NotFoundError
 from api.models import StudyRow, TrialRow, UTCDateTime, encode_value, utcnow
-from api.store.base import ALL_OWNERS, Page, StoreBase, chunks, new_id, owner_clause
+from api.store.base import ALL_OWNERS, KEEP_VERSION, Page, StoreBase, chunks, new_id, owner_clause
 from optimizer.protocols import StudyRecord, StudyStatus, TrialState
 
 log = logging.getLogger(__name__)
@@ -55,18 +55,20 @@ class StudyStore(StoreBase):
             return self._study_row(s, study_id, visible_to)
 
     def study_version(self, study_id: str, visible_to: str | None = ALL_OWNERS) -> sa.Row:
-        """(id, owner, status, updated_at, generation, trials_changed_at) of a visible study, without
-        loading its JSON columns: the check that a hot read may go ahead, and the version of
-        cached views. ``trials_changed_at`` is the newest ``updated_at`` of its trials (every
-        trial write sets it; one index lookup), the version of what results change: counts."""
+        """(id, owner, status, generation, change_number, trial_changes, trials_changed_at) of a
+        visible study, without loading its JSON columns: the check that a hot read may go ahead,
+        and the versions of cached views: ``change_number`` of the views made from the study row,
+        ``trial_changes`` (the study's change counter) of those that every trial write changes
+        (counts). ``trials_changed_at`` is the newest ``updated_at`` of its trials (one index
+        lookup)."""
         changed = (
             sa.select(sa.func.max(TrialRow.updated_at)).where(TrialRow.study_id == study_id).scalar_subquery()
         )
         with self.session() as s:
             row = s.execute(
                 sa.select(
-                    StudyRow.id, StudyRow.owner, StudyRow.status, StudyRow.updated_at, StudyRow.generation,
-                    changed.label("trials_changed_at"),
+                    StudyRow.id, StudyRow.owner, StudyRow.status, StudyRow.generation, StudyRow.change_number,
+                    StudyRow.trial_changes, changed.label("trials_changed_at"),
                 )
                 .where(StudyRow.id == study_id)
             ).one_or_none()
@@ -100,7 +102,7 @@ class StudyStore(StoreBase):
             s.execute(
                 sa.update(StudyRow)
                 .where(StudyRow.id == study_id)
-                .values(extra={**extra, "warnings": list(warnings)}, updated_at=StudyRow.updated_at)
+                .values(KEEP_VERSION | {"extra": {**extra, "warnings": list(warnings)}})
                 .execution_options(synchronize_session=False)
             )
 

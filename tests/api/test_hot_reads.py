@@ -276,3 +276,42 @@ def test_an_unchanged_polled_view_answers_304_to_the_etag_it_sent(client, keys, 
     assert first.status_code == 200 and first.headers["cache-control"] == "no-cache"
     assert again.status_code == 304 and again.content == b""
     assert changed.status_code == 200 and changed.json()["updated_at"] != first.json()["updated_at"]
+
+
+POLLED_VIEWS = ("", "/pareto", "/recommendation", "/progress", "/identifiability")
+
+
+def test_a_client_holding_the_current_version_gets_a_304_from_any_server_without_the_view(
+    client, settings, keys, store, engine
+):
+    # A view's ETag was a hash of its bytes: a conditional GET found (or, in another process or
+    # after a change elsewhere, built) the view to compare. Its ETag is now the study's change
+    # number, so a server whose cache is empty answers from the one version lookup.
+    import sqlalchemy as sa
+
+    study_id = _run(store)
+    urls = [f"/api/v1/studies/{study_id}{view}" for view in POLLED_VIEWS]
+    tags = {url: client.get(url, headers=keys.auth()).headers["ETag"] for url in urls}
+    statements: list[str] = []
+    held = settings.model_copy(update={"api_key_cache_s": 3600.0})
+
+    with TestClient(create_app(held, engine=engine)) as replica:  # another process: its cache is empty
+        replica.get("/api/v1/studies", headers=keys.auth())  # the key is verified once, then cached
+        def count(*args):
+            statements.append(args[2])
+
+        sa.event.listen(engine, "before_cursor_execute", count)
+        try:
+            answers = {url: replica.get(url, headers={**keys.auth(), "If-None-Match": tags[url]})
+                       for url in urls}
+        finally:
+            sa.event.remove(engine, "before_cursor_execute", count)
+        store.set_status(study_id, StudyStatus.DONE, "a change of the study")
+        after = {url: replica.get(url, headers={**keys.auth(), "If-None-Match": tags[url]}) for url in urls}
+
+    assert {url: answer.status_code for url, answer in answers.items()} == {url: 304 for url in urls}
+    assert all(answers[url].headers["ETag"] == tags[url] for url in urls)
+    assert all(answer.headers["X-Demcal-View"] == "current" for answer in answers.values())
+    assert len(statements) == len(urls)  # the version lookup, and nothing else
+    assert after[urls[0]].status_code == 200 and after[urls[0]].json()["status"] == "done"
+    assert after[urls[0]].headers["ETag"] != tags[urls[0]]

@@ -44,14 +44,14 @@ def test_an_expired_lease_goes_to_the_next_process_and_the_old_holder_knows(stor
 def test_release_frees_the_study_and_leases_leave_the_study_version_alone(store):
     study_id = create(store)
     leases, other = DatabaseLeases(store, "a"), DatabaseLeases(store, "b")
-    version = store.study_version(study_id).updated_at
+    version = store.study_version(study_id).trial_changes
 
     leases.acquire(study_id)
     leases.renew(study_id)
     leases.release(study_id)
 
     assert other.acquire(study_id)
-    assert store.study_version(study_id).updated_at == version
+    assert store.study_version(study_id).trial_changes == version
 
 
 @pytest.fixture
