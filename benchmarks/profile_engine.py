@@ -89,9 +89,9 @@ def _rounded_pair_geometry(bodies, spheres, pairs, which):
             vb, b = spheres.x, place(j, 1, spheres.eye, spheres.zero)
         ra, rb = spheres.rounding[i], spheres.rounding[j]
         if which == 0:
-            axis = pairs.axis[p].copy()
+            axis, simplex = pairs.axis[p].copy(), pairs.simplex[p].copy()
             r = pair_geometry(
-                va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, spheres.work
+                va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, simplex, spheres.work
             )
             from_gjk += r[0]
             continue

@@ -37,8 +37,10 @@ import numpy as np
 from dem.conf import JIT_FLAGS
 
 MAX_FEATURE = 128  # most vertices of a core (the scratch holds every one's projection)
+SIMPLEX = 7  # a pair's cached GJK simplex: its size, then the vertex rows (of a, of b) of each point
 _MAX_ITERATIONS = 64
 _REL_EPS = 1e-12
+_COLUMNS = 11  # a simplex row: w, a, b (3 each), the vertex rows of a and b
 
 
 class Core(NamedTuple):
@@ -72,12 +74,11 @@ def scratch() -> np.ndarray:
     return np.zeros((6, MAX_FEATURE, 3))
 
 
-@numba.njit(**JIT_FLAGS)
-def support(verts, core, dx, dy, dz):
-    """World position of the vertex of ``core`` (rows of ``verts``) furthest along d."""
-    start, count, rot, pos = core
+@numba.njit(inline="always", **JIT_FLAGS)
+def support_row(verts, core, dx, dy, dz):
+    """Row of ``verts`` of the vertex of ``core`` furthest along d (the first of equals)."""
+    start, count, rot, _ = core
     r0, r1, r2 = rot
-    px, py, pz = pos
     bx = r0[0] * dx + r1[0] * dy + r2[0] * dz
     by = r0[1] * dx + r1[1] * dy + r2[1] * dz
     bz = r0[2] * dx + r1[2] * dy + r2[2] * dz
@@ -88,23 +89,38 @@ def support(verts, core, dx, dy, dz):
         if s > best:
             best = s
             k = v
+    return k
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def placed(verts, core, k):
+    """World position of row k of ``verts``, a vertex of ``core``."""
+    _, _, rot, pos = core
+    r0, r1, r2 = rot
     x, y, z = verts[k, 0], verts[k, 1], verts[k, 2]
     return (
-        px + r0[0] * x + r0[1] * y + r0[2] * z,
-        py + r1[0] * x + r1[1] * y + r1[2] * z,
-        pz + r2[0] * x + r2[1] * y + r2[2] * z,
+        pos[0] + r0[0] * x + r0[1] * y + r0[2] * z,
+        pos[1] + r1[0] * x + r1[1] * y + r1[2] * z,
+        pos[2] + r2[0] * x + r2[1] * y + r2[2] * z,
     )
 
 
 @numba.njit(**JIT_FLAGS)
+def support(verts, core, dx, dy, dz):
+    """World position of the vertex of ``core`` (rows of ``verts``) furthest along d."""
+    return placed(verts, core, support_row(verts, core, dx, dy, dz))
+
+
+@numba.njit(**JIT_FLAGS)
 def _keep(simplex, lam, idx0, idx1, idx2, k):
-    """Reduce the simplex (rows: w, a, b stacked in columns 0:3, 3:6, 6:9) to rows idx*, which
-    increase (row r comes from a row >= r): copied in place, in order, without a heap array."""
+    """Reduce the simplex (rows: w, a, b stacked in columns 0:3, 3:6, 6:9, and the vertex rows of
+    a and b in columns 9 and 10) to rows idx*, which increase (row r comes from a row >= r):
+    copied in place, in order, without a heap array."""
     sel = (idx0, idx1, idx2)
     for r in range(k):
         src = sel[r]
         if src != r:
-            for c in range(9):
+            for c in range(_COLUMNS):
                 simplex[r, c] = simplex[src, c]
     return k
 
@@ -183,7 +199,7 @@ def _closest_tetrahedron(s, lam):
     best = np.inf
     best_face = -1
     best_k = 0
-    tri = np.empty((3, 9))
+    tri = np.empty((3, _COLUMNS))
     blam = np.zeros(4)
     tlam = np.zeros(4)
     for f in range(4):
@@ -196,7 +212,7 @@ def _closest_tetrahedron(s, lam):
         if side_origin * side_other >= 0.0:
             continue  # the origin is on the inner side of this face
         for r, idx in enumerate((a, b, c)):
-            for col in range(9):
+            for col in range(_COLUMNS):
                 tri[r, col] = s[idx, col]
         tlam[:] = 0.0
         k = _closest_triangle(tri, tlam)
@@ -213,12 +229,12 @@ def _closest_tetrahedron(s, lam):
             for r in range(k):
                 blam[r] = tlam[r]
             for r in range(3):
-                for col in range(9):
+                for col in range(_COLUMNS):
                     s[4 + r, col] = tri[r, col]
     if best_face < 0:
         return 4
     for r in range(best_k):
-        for col in range(9):
+        for col in range(_COLUMNS):
             s[r, col] = s[4 + r, col]
         lam[r] = blam[r]
     return best_k
@@ -235,34 +251,79 @@ def _flat(s):
     return abs(volume) <= 1e-12 * scale**1.5
 
 
+@numba.njit(inline="always", **JIT_FLAGS)
+def _put(s, r, va, a, ka, vb, b, kb):
+    """Simplex row r: the support point of vertex row ka of a and kb of b."""
+    ax, ay, az = placed(va, a, ka)
+    bx, by, bz = placed(vb, b, kb)
+    s[r, 0], s[r, 1], s[r, 2] = ax - bx, ay - by, az - bz
+    s[r, 3], s[r, 4], s[r, 5] = ax, ay, az
+    s[r, 6], s[r, 7], s[r, 8] = bx, by, bz
+    s[r, 9], s[r, 10] = ka, kb
+
+
 @numba.njit(**JIT_FLAGS)
-def gjk_distance(va, a, vb, b):
+def _warm_start(va, a, vb, b, simplex, s, lam):
+    """The cached simplex (``SIMPLEX`` ints) as the starting simplex in s, reduced to its point
+    closest to the origin (weights in lam); returns its size, 0 if the cache holds none or rows
+    that are not vertices of these cores (a list rebuild reorders the pairs)."""
+    k = simplex[0]
+    if k < 1 or k > 3:
+        return 0
+    for r in range(k):
+        ka, kb = simplex[1 + 2 * r], simplex[2 + 2 * r]
+        if not (a.start <= ka < a.start + a.count and b.start <= kb < b.start + b.count):
+            return 0
+    for r in range(k):
+        _put(s, r, va, a, simplex[1 + 2 * r], vb, b, simplex[2 + 2 * r])
+    if k == 1:
+        lam[0] = 1.0
+        return 1
+    if k == 2:
+        return _closest_segment(s, lam)
+    return _closest_triangle(s, lam)
+
+
+@numba.njit(**JIT_FLAGS)
+def gjk_distance(va, a, vb, b, simplex=None):
     """Distance of the convex shapes ``a`` and ``b`` (``Core``s of the vertex arrays va, vb) and
     their closest points.
 
     Returns ``(d, ax, ay, az, bx, by, bz)``; d = 0 when the hulls intersect (closest points are
-    then meaningless).
+    then meaningless). ``simplex`` (``SIMPLEX`` ints, optional): the final simplex of the last
+    query of this pair, to start from (warm start: in contact, the closest features rarely
+    change between steps, and one iteration confirms them instead of about eight); updated.
+    Without it GJK starts from the support points along the line of the centres.
     """
     pa, pb = a.pos, b.pos
-    s = np.zeros((7, 9))  # rows 0-3 the simplex, 4-6 scratch for the tetrahedron case
+    s = np.zeros((7, _COLUMNS))  # rows 0-3 the simplex, 4-6 scratch for the tetrahedron case
     lam = np.zeros(4)
-    dx, dy, dz = pa[0] - pb[0], pa[1] - pb[1], pa[2] - pb[2]
-    if dx == 0.0 and dy == 0.0 and dz == 0.0:
-        dx = 1.0
-    ax, ay, az = support(va, a, -dx, -dy, -dz)
-    bx, by, bz = support(vb, b, dx, dy, dz)
-    s[0, 0], s[0, 1], s[0, 2] = ax - bx, ay - by, az - bz
-    s[0, 3], s[0, 4], s[0, 5] = ax, ay, az
-    s[0, 6], s[0, 7], s[0, 8] = bx, by, bz
-    lam[0] = 1.0
-    k = 1
-    vx, vy, vz = s[0, 0], s[0, 1], s[0, 2]
+    k = 0
+    if simplex is not None:
+        k = _warm_start(va, a, vb, b, simplex, s, lam)
+    if k == 0:
+        dx, dy, dz = pa[0] - pb[0], pa[1] - pb[1], pa[2] - pb[2]
+        if dx == 0.0 and dy == 0.0 and dz == 0.0:
+            dx = 1.0
+        _put(s, 0, va, a, support_row(va, a, -dx, -dy, -dz), vb, b, support_row(vb, b, dx, dy, dz))
+        lam[0] = 1.0
+        k = 1
+        vx, vy, vz = s[0, 0], s[0, 1], s[0, 2]
+    else:
+        vx = vy = vz = 0.0
+        for r in range(k):
+            vx += lam[r] * s[r, 0]
+            vy += lam[r] * s[r, 1]
+            vz += lam[r] * s[r, 2]
     for _ in range(_MAX_ITERATIONS):
         vv = vx * vx + vy * vy + vz * vz
         if vv == 0.0:
+            if simplex is not None:
+                simplex[0] = 0  # intersecting: the next query starts afresh
             return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        ax, ay, az = support(va, a, -vx, -vy, -vz)
-        bx, by, bz = support(vb, b, vx, vy, vz)
+        ka, kb = support_row(va, a, -vx, -vy, -vz), support_row(vb, b, vx, vy, vz)
+        ax, ay, az = placed(va, a, ka)
+        bx, by, bz = placed(vb, b, kb)
         wx, wy, wz = ax - bx, ay - by, az - bz
         if vv - (vx * wx + vy * wy + vz * wz) <= _REL_EPS * vv:
             break
@@ -275,6 +336,7 @@ def gjk_distance(va, a, vb, b):
         s[k, 0], s[k, 1], s[k, 2] = wx, wy, wz
         s[k, 3], s[k, 4], s[k, 5] = ax, ay, az
         s[k, 6], s[k, 7], s[k, 8] = bx, by, bz
+        s[k, 9], s[k, 10] = ka, kb
         k += 1
         if k == 4 and _flat(s):
             k = 3  # w lies in the triangle's plane: no progress is possible
@@ -287,6 +349,8 @@ def gjk_distance(va, a, vb, b):
         else:
             k = _closest_tetrahedron(s, lam)
             if k == 4:
+                if simplex is not None:
+                    simplex[0] = 0
                 return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         nvx = nvy = nvz = 0.0
         for r in range(k):
@@ -304,6 +368,10 @@ def gjk_distance(va, a, vb, b):
         bx += lam[r] * s[r, 6]
         by += lam[r] * s[r, 7]
         bz += lam[r] * s[r, 8]
+    if simplex is not None:
+        simplex[0] = k
+        for r in range(k):
+            simplex[1 + 2 * r], simplex[2 + 2 * r] = int(s[r, 9]), int(s[r, 10])
     d = math.sqrt((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2)
     return d, ax, ay, az, bx, by, bz
 

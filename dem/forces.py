@@ -238,7 +238,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
             continue
         if core_count[i] > 0 or core_count[j] > 0:
             delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww = _rounded_pair(
-                i, j, bodies, spheres, pairs.axis[p]
+                i, j, bodies, spheres, pairs.axis[p], pairs.simplex[p]
             )
             if delta <= 0.0:
                 pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
@@ -345,7 +345,7 @@ def _sphere_pair_force(p, g, rows, n, delta, bodies, spheres, pairs, hist_dt):
 
 
 @numba.njit(**JIT_FLAGS)
-def _rounded_pair(i, j, bodies, spheres, axis):
+def _rounded_pair(i, j, bodies, spheres, axis, simplex):
     """Contact of sphere rows i and j when one of them is a rounded-polyhedron piece (a plain
     sphere is a one-vertex core at its centre): ``dem.rounded_contact.pair_geometry``."""
     ba, bb = spheres.body[i], spheres.body[j]
@@ -359,7 +359,9 @@ def _rounded_pair(i, j, bodies, spheres, axis):
     else:
         vb, b = spheres.x, place(j, 1, spheres.eye, spheres.zero)
     ra, rb = spheres.rounding[i], spheres.rounding[j]
-    return pair_geometry(va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, spheres.work)
+    return pair_geometry(
+        va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, simplex, spheres.work
+    )
 
 
 @numba.njit(**JIT_FLAGS)

@@ -28,6 +28,7 @@ import numpy as np
 
 from dem.conf import JIT_FLAGS
 from dem.contact import N_SUMS
+from dem.convex import SIMPLEX
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 
 # Layout of a list's ``count``: pairs in use, groups in use (sphere pairs), room needed after a
@@ -71,6 +72,7 @@ class SpherePairs(NamedTuple):
     axis: np.ndarray  # (capacity, 3) rounded pieces: cached separating direction (any is valid)
     point: np.ndarray  # (capacity, 3) scratch of the force pass: a piece pair's contact point
     moment: np.ndarray  # (capacity, 3) scratch of the force pass: its patch's second moments
+    simplex: np.ndarray  # (capacity, SIMPLEX) int32 rounded pieces: last GJK simplex (any is valid)
 
 
 class WallPairs(NamedTuple):
@@ -171,6 +173,7 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
         np.zeros((capacity, 3)),
         np.zeros((capacity, 3)),
         np.zeros((capacity, 3)),
+        np.zeros((capacity, SIMPLEX), dtype=_INDEX),
     )
 
 

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-from dem.convex import place, scratch
+from dem.convex import SIMPLEX, place, scratch
 from dem.crown import _height_fit
 from dem.polyhedra import Polyhedron
 from dem.rounded_contact import pair_geometry
@@ -44,7 +44,17 @@ def test_boxes_whose_faces_meet_only_at_a_corner_touch_at_that_corner():
     core_b = place(0, len(b.core), np.eye(3), np.zeros(3))
 
     delta, d, nx, ny, nz, cx, cy, cz, *_ = pair_geometry(
-        a.core, core_a, a.rounding, crown_a, b.core, core_b, b.rounding, crown_b, np.zeros(3), scratch()
+        a.core,
+        core_a,
+        a.rounding,
+        crown_a,
+        b.core,
+        core_b,
+        b.rounding,
+        crown_b,
+        np.zeros(3),
+        np.zeros(SIMPLEX, np.int32),
+        scratch(),
     )
 
     kappa_a, kappa_b = crown_a[0], crown_b[0]

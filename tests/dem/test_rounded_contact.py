@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from dem.convex import place, scratch
+from dem.convex import SIMPLEX, gjk_distance, place, scratch
 from dem.facets import build_facets
 from dem.polyhedra import Polyhedron
 from dem.quaternion import from_axis_angle, matrix
@@ -130,10 +130,13 @@ def test_a_box_above_the_facet_plane_is_rejected_before_gjk():
     assert delta < 0
 
 
-def pair(pos_a, rot_a, pos_b, rot_b, axis):
+def pair(pos_a, rot_a, pos_b, rot_b, axis, simplex=None):
     a = place(0, 8, np.asarray(rot_a, float), np.asarray(pos_a, float))
     b = place(0, 8, np.asarray(rot_b, float), np.asarray(pos_b, float))
-    return pair_geometry(BOX.core, a, BOX.rounding, CROWN, BOX.core, b, BOX.rounding, CROWN, axis, scratch())
+    simplex = np.zeros(SIMPLEX, np.int32) if simplex is None else simplex
+    return pair_geometry(
+        BOX.core, a, BOX.rounding, CROWN, BOX.core, b, BOX.rounding, CROWN, axis, simplex, scratch()
+    )
 
 
 def test_stacked_boxes_touch_midway_between_the_feet_of_their_centres():
@@ -160,3 +163,39 @@ def test_the_cached_separating_axis_gives_the_gjk_answer_for_pairs_apart():
     assert near[0] < 0 and far_cached[0] < 0
     # The gap along any direction is at most the distance: the cached test never misses a contact.
     assert far_fresh[0] - 1e-15 <= far_cached[0] < 0
+
+
+def test_the_cached_simplex_holds_the_closest_features_of_stacked_boxes():
+    simplex = np.zeros(SIMPLEX, np.int32)
+    pair((0.01, 0.0, 0.0099), EYE, (0, 0, 0), EYE, np.zeros(3), simplex)
+
+    k = simplex[0]
+    assert 1 <= k <= 3
+    rows_a, rows_b = simplex[1 : 1 + 2 * k : 2], simplex[2 : 2 + 2 * k : 2]
+    # A's bottom face over B's top face: the simplex's points pair A's lower and B's upper corners.
+    assert np.all(BOX.core[rows_a, 2] < 0) and np.all(BOX.core[rows_b, 2] > 0)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gjk_warm_started_from_any_cached_simplex_gives_the_cold_answer(seed):
+    rng = np.random.default_rng(seed)
+    rot_a = matrix(from_axis_angle(rng.normal(size=3), rng.uniform(0, math.pi)))
+    rot_b = matrix(from_axis_angle(rng.normal(size=3), rng.uniform(0, math.pi)))
+    pos_a = np.array([0.0, 0.0, 0.045]) + rng.uniform(-0.01, 0.01, 3)
+    a, b = place(0, 8, rot_a, pos_a), place(0, 8, rot_b, np.zeros(3))
+    cold = gjk_distance(BOX.core, a, BOX.core, b)
+    # The simplex of this pair one step earlier, and simplices of other features, even points
+    # furthest from the answer (A's highest corner against B's lowest), all valid starts.
+    moved = place(0, 8, rot_a, pos_a + 1e-4)
+    last = np.zeros(SIMPLEX, np.int32)
+    gjk_distance(BOX.core, moved, BOX.core, b, last)
+    far = np.array([3, 0, 0, 7, 1, 6, 2], np.int32)
+    far[1::2] = [int(np.argmax(BOX.core @ rot_a.T[:, 2])), 0, 1]
+    far[2::2] = [int(np.argmin(BOX.core @ rot_b.T[:, 2])), 7, 6]
+    for start in (last, far, np.array([2, 0, 1, 2, 3, 0, 0], np.int32)):
+        warm = gjk_distance(BOX.core, a, BOX.core, b, start.copy())
+        assert warm[0] == pytest.approx(cold[0], rel=1e-12)
+        # closest points: the same up to rounding, or others at the same distance (parallel faces)
+        gap = np.array(warm[1:4]) - np.array(warm[4:7])
+        assert np.linalg.norm(gap) == pytest.approx(cold[0], rel=1e-12)
+        assert gap @ (np.array(cold[1:4]) - np.array(cold[4:7])) == pytest.approx(cold[0] ** 2, rel=1e-9)
