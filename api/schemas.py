@@ -93,8 +93,9 @@ class TrialPage(_Wire):
     total: int
     limit: int
     offset: int
-    server_time: datetime = Field(
-        description="Pass it back as ?updated_since= to receive only trials changed since this page."
+    changes: int = Field(
+        description="The study's change number when this page was read: pass it back as "
+        "?changed_since= to receive only the trials changed since."
     )
 
 
@@ -114,6 +115,10 @@ class StudyListItem(_Wire):
     generations_total: int = Field(0, description="Generations the study's budget allows.")
     created_at: datetime
     updated_at: datetime
+    version: int = Field(
+        0, description="The change number of the study's last change of status, generation, ranking or "
+        "trials added: the version of its recommendation, progress, identifiability and Pareto front."
+    )
     started_at: datetime | None = Field(None, description="When the study first started running.")
     finished_at: datetime | None = Field(None, description="When it became done, cancelled or failed.")
     recommendation: dict[str, Any] | None = Field(
@@ -163,6 +168,10 @@ class StudyRead(_Wire):
     )
     created_at: datetime
     updated_at: datetime
+    version: int = Field(
+        0, description="The change number of the study's last change of status, generation, ranking or "
+        "trials added: the version of its recommendation, progress, identifiability and Pareto front."
+    )
     started_at: datetime | None = Field(None, description="When the study first started running.")
     finished_at: datetime | None = Field(None, description="When it became done, cancelled or failed.")
     responses: list[ResponseRead] = Field(

@@ -16,8 +16,8 @@ requests, which is what 50 open dashboards do. Prints p50/p99 latency per endpoi
 Goal: p99 under 50 ms.
 
 ``--dashboard`` makes each client poll what the study page polls (``api/dashboard/static/
-study.js``): the study, the trials changed since its last poll (``updated_since``), and, when
-the study's version (updated_at, generation, status) changed, the recommendation, progress and
+study.js``): the study, the trials changed since its last poll (``changed_since``), and, when
+the study's version changed, the recommendation, progress and
 identifiability (and meanwhile each one whose last answer was stale, ``X-Demcal-View``, once its
 ``Retry-After`` has passed),
 revalidating what it has with the ETags it was sent as the browser does (304 when unchanged).
@@ -342,13 +342,12 @@ async def load(
         await asyncio.sleep(think * rng.uniform(0, 1))
         while time.monotonic() < stop:
             body = await timed(client, "study", study, cache=cache)
-            query = {"limit": 5000, "offset": 0} if cursor is None else {
-                "limit": 5000, "offset": 0, "updated_since": cursor}
-            page = await timed(client, "trials", f"{study}/trials", query if cursor else {"limit": 1})
+            query = {"limit": 1} if cursor is None else {"limit": 5000, "offset": 0, "changed_since": cursor}
+            page = await timed(client, "trials", f"{study}/trials", query)
             if page is None or body is None:
                 continue
-            cursor = page["server_time"]
-            version = (body["updated_at"], body["progress"]["generation"], body["status"])
+            cursor = page["changes"]
+            version = body["version"]
             due = [path for path in views if (version != views_read or cache.get(("stale", path)))
                    and time.monotonic() >= cache.get(("retry", path), 0.0)]
             await asyncio.gather(*(timed(client, path.rsplit("/", 1)[1], path, cache=cache) for path in due))

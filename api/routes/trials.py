@@ -1,8 +1,7 @@
-"""Trials of a study: a filtered page (with ``updated_since`` for incremental polling), one trial."""
+"""Trials of a study: a filtered page (with ``changed_since`` for incremental polling), one trial."""
 
 from __future__ import annotations
 
-from datetime import datetime
 from typing import Annotated
 
 from fastapi import APIRouter, Query, Response
@@ -27,13 +26,13 @@ def list_trials(
     generation: Annotated[int | None, Query(ge=0, le=1_000_000)] = None,
     state: Annotated[TrialState | None, Query()] = None,
     pareto: Annotated[bool | None, Query(description="Only (non-)members of the Pareto front.")] = None,
-    updated_since: Annotated[
-        datetime | None,
-        Query(description="Only trials changed at or after this time: pass the previous page's "
-              "server_time (ISO 8601) to poll incrementally."),
+    changed_since: Annotated[
+        int | None,
+        Query(ge=0, le=2**62, description="Only trials changed after this change number of the study: "
+              "pass the previous page's changes to poll incrementally."),
     ] = None,
 ):
-    where = TrialFilter(generation=generation, state=state, pareto=pareto, updated_since=updated_since)
+    where = TrialFilter(generation=generation, state=state, pareto=pareto, changed_since=changed_since)
     return Response(
         trials.list_trials_json(store, views, study_id, principal, where, limit, offset),
         media_type="application/json",

@@ -120,7 +120,7 @@ def get_study(
         ),
         best=best,
         recommendation=row.recommendation, warnings=_warnings(store, row),
-        created_at=row.created_at, updated_at=row.updated_at,
+        created_at=row.created_at, updated_at=row.updated_at, version=row.change_number,
         started_at=row.started_at, finished_at=row.finished_at, responses=declared_responses(row.definition),
         f1_unit=f1_unit(row.definition), f1_rule=f1_rule(parsed) if parsed else "",
     )

@@ -20,10 +20,9 @@ import csv
 import io
 import math
 from collections.abc import Iterator
-from datetime import UTC
 
 from api.auth import Principal
-from api.models import TrialRow, decode_value, utcnow
+from api.models import TrialRow, decode_value
 from api.schemas import (
     GenerationSummary,
     ParetoFront,
@@ -94,17 +93,17 @@ def list_trials_json(
 
     The unfiltered total only changes when trials are added, which updates the study row, so it
     is cached per study version like the Pareto front; filtered totals are counted each time,
-    unless the page itself tells (``trial_page_rows``). A dashboard's poll for the changes since
-    its last one (``updated_since``) when no trial changed since is answered from the study's
-    version alone: nothing is newer than its trials' newest ``updated_at``.
+    unless the page itself tells (``trial_page_rows``).
+
+    A dashboard polls for the changes since its last page (``changed_since``, that page's
+    ``changes``): the study's change counter, read before the page, so that every write numbered
+    up to it has committed (numbers are taken in commit order) and one committed later is sent
+    again at the next poll, not missed, whatever its process's clock said (wall-clock stamps
+    could miss it). A poll with nothing newer is answered from the counter alone.
     """
-    # Taken before the queries, so a row updated while we read is sent again next poll, not missed.
-    server_time = utcnow()
     study = store.study_version(study_id, principal.visible_to)
-    since = where.updated_since
-    if since is not None and since.tzinfo is None:
-        since = since.replace(tzinfo=UTC)  # as the store reads a naive time
-    if since is not None and (study.trials_changed_at is None or study.trials_changed_at < since):
+    since = where.changed_since
+    if since is not None and study.trial_changes <= since:
         page = Page([], 0)
     else:
         total = None
@@ -116,7 +115,7 @@ def list_trials_json(
         page = store.trial_page_rows(study_id, where, limit, offset, total=total)
     return TrialPage.model_validate(
         {"items": [_trial_item(row) for row in page.items], "total": page.total, "limit": limit,
-         "offset": offset, "server_time": server_time}
+         "offset": offset, "changes": study.trial_changes}
     ).model_dump_json().encode()
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime
 
 import sqlalchemy as sa
 
@@ -22,7 +21,7 @@ class TrialFilter:
     generation: int | None = None
     state: TrialState | None = None
     pareto: bool | None = None
-    updated_since: datetime | None = None
+    changed_since: int | None = None  # a change number of the study (``StoreBase._change_numbers``)
 
 
 TRIAL_READ_COLUMNS = (
@@ -45,10 +44,8 @@ class DashboardReads(StoreBase):
             clauses.append(TrialRow.state == where.state.value)
         if where.pareto is not None:
             clauses.append(TrialRow.pareto.is_(where.pareto))
-        if where.updated_since is not None:
-            # ">=": rows updated in the same clock tick as the previous poll are sent again rather
-            # than missed; clients upsert by id.
-            clauses.append(TrialRow.updated_at >= where.updated_since)
+        if where.changed_since is not None:
+            clauses.append(TrialRow.change_number > where.changed_since)
         return clauses
 
     def trial_count(self, study_id: str, where: TrialFilter) -> int:

@@ -55,20 +55,16 @@ class StudyStore(StoreBase):
             return self._study_row(s, study_id, visible_to)
 
     def study_version(self, study_id: str, visible_to: str | None = ALL_OWNERS) -> sa.Row:
-        """(id, owner, status, generation, change_number, trial_changes, trials_changed_at) of a
-        visible study, without loading its JSON columns: the check that a hot read may go ahead,
-        and the versions of cached views: ``change_number`` of the views made from the study row,
-        ``trial_changes`` (the study's change counter) of those that every trial write changes
-        (counts). ``trials_changed_at`` is the newest ``updated_at`` of its trials (one index
-        lookup)."""
-        changed = (
-            sa.select(sa.func.max(TrialRow.updated_at)).where(TrialRow.study_id == study_id).scalar_subquery()
-        )
+        """(id, owner, status, generation, change_number, trial_changes) of a visible study, without
+        loading its JSON columns: the check that a hot read may go ahead, and the versions of
+        cached views: ``change_number`` of the views made from the study row, ``trial_changes``
+        (the study's change counter) of those that every trial write changes (counts), and the
+        cursor of a trial poll (``changed_since``)."""
         with self.session() as s:
             row = s.execute(
                 sa.select(
                     StudyRow.id, StudyRow.owner, StudyRow.status, StudyRow.generation, StudyRow.change_number,
-                    StudyRow.trial_changes, changed.label("trials_changed_at"),
+                    StudyRow.trial_changes,
                 )
                 .where(StudyRow.id == study_id)
             ).one_or_none()

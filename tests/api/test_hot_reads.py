@@ -230,7 +230,7 @@ def test_each_dashboard_poll_costs_one_query_and_the_study_read_follows_every_tr
     with TestClient(create_app(held, engine=engine)) as client:
         for path in polled:  # the pages' first load builds every view
             client.get(base + path, headers=keys.auth()).raise_for_status()
-        cursor = client.get(f"{base}/trials", params={"limit": 1}, headers=keys.auth()).json()["server_time"]
+        cursor = client.get(f"{base}/trials", params={"limit": 1}, headers=keys.auth()).json()["changes"]
         sa.event.listen(engine, "before_cursor_execute", count)
         try:
             cost = {}
@@ -239,9 +239,9 @@ def test_each_dashboard_poll_costs_one_query_and_the_study_read_follows_every_tr
                 client.get(base + path, headers=keys.auth()).raise_for_status()
                 cost[path] = len(statements)
             statements.clear()
-            since = {"updated_since": cursor}
+            since = {"changed_since": cursor}
             unchanged = client.get(f"{base}/trials", params=since, headers=keys.auth()).json()
-            cost["/trials?updated_since"] = len(statements)
+            cost["/trials?changed_since"] = len(statements)
         finally:
             sa.event.remove(engine, "before_cursor_execute", count)
         template = store.trials(study_id)[0].spec
@@ -252,7 +252,7 @@ def test_each_dashboard_poll_costs_one_query_and_the_study_read_follows_every_tr
         seen.append(client.get(base, headers=keys.auth()).json()["progress"])
         store.record_result(TrialOutcome(new.trial_id, synthetic_result(new)))
         seen.append(client.get(base, headers=keys.auth()).json()["progress"])
-        changed = client.get(f"{base}/trials", params={"updated_since": cursor}, headers=keys.auth()).json()
+        changed = client.get(f"{base}/trials", params={"changed_since": cursor}, headers=keys.auth()).json()
 
     assert cost == dict.fromkeys(cost, 1), cost
     assert unchanged["items"] == [] and unchanged["total"] == 0

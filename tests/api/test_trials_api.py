@@ -46,7 +46,7 @@ def test_trial_list_pages_and_filters(client, keys, finished):
     assert first["f1"] is not None
 
 
-def test_polling_with_updated_since_returns_only_changed_trials(client, keys, store, finished):
+def test_polling_with_changed_since_returns_only_changed_trials(client, keys, store, finished):
     from dataclasses import replace
 
     from optimizer.protocols import trial_id
@@ -57,9 +57,45 @@ def test_polling_with_updated_since_returns_only_changed_trials(client, keys, st
     changed = trial_id(finished, 99, 0)
     store.add_trials([replace(template, trial_id=changed, individual=99, generation=3)])
 
-    later = client.get(url, params={"updated_since": first["server_time"]}, headers=keys.auth()).json()
+    later = client.get(url, params={"changed_since": first["changes"]}, headers=keys.auth()).json()
 
     assert [item["id"] for item in later["items"]] == [changed]
+
+
+def test_a_poll_does_not_miss_a_result_written_by_a_process_whose_clock_is_behind(
+    client, keys, store, monkeypatch
+):
+    # The dashboard polled with the previous page's server time (updated_since) and the study's
+    # version was the newest trial's updated_at: a result stamped earlier by a writer whose clock
+    # is behind fell before both, and the page never showed it. Change numbers cannot.
+    from datetime import timedelta
+
+    import api.store.trials as trial_writes
+    from optimizer.memory import synthetic_result
+    from optimizer.protocols import TrialOutcome, TrialSpec, trial_id
+
+    study_id = store.create_study(study_definition(), owner="alice")
+    params = {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.5}
+    specs = [TrialSpec(trial_id(study_id, i, 0), study_id, i, 0, 0, i, params, {}) for i in range(2)]
+    store.add_trials(specs)
+    url = f"/api/v1/studies/{study_id}/trials"
+    poll = lambda since: client.get(url, params=since, headers=keys.auth()).json()  # noqa: E731
+    study = lambda: client.get(f"/api/v1/studies/{study_id}", headers=keys.auth()).json()  # noqa: E731
+    page = poll({"limit": 1})
+    store.record_result(TrialOutcome(specs[0].trial_id, synthetic_result(specs[0])))
+    page = poll({"changed_since": page["changes"]})
+    before = study()["progress"]["trials_done"]
+    clock = trial_writes.utcnow
+    monkeypatch.setattr(trial_writes, "utcnow", lambda: clock() - timedelta(seconds=5))
+    store.record_result(TrialOutcome(specs[1].trial_id, synthetic_result(specs[1])))  # 5 s behind
+    monkeypatch.undo()
+
+    late = poll({"changed_since": page["changes"]})
+
+    assert [item["id"] for item in page["items"]] == [specs[0].trial_id]
+    assert [item["id"] for item in late["items"]] == [specs[1].trial_id]
+    assert late["items"][0]["state"] == "done"
+    assert (before, study()["progress"]["trials_done"]) == (1, 2)
 
 
 def test_one_trial_has_its_full_result(client, keys, store, finished):

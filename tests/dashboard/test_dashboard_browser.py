@@ -132,7 +132,7 @@ def test_plots_switch_to_webgl_and_boxes_above_1500_points(page, dashboard):
 def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
     study_id = running_study(dashboard, "live")
     polls = []
-    page.on("response", lambda response: polls.append(response) if "updated_since=" in response.url else None)
+    page.on("response", lambda response: polls.append(response) if "changed_since=" in response.url else None)
     page.goto(dashboard.url(f"/studies/{study_id}"))
     page.wait_for_function(PLOTTED, arg="pareto-plot")
 
@@ -142,7 +142,7 @@ def test_a_running_study_polls_only_the_trials_that_changed(page, dashboard):
     page.wait_for_function("() => document.getElementById('pareto-plot').data[0].x.length === 9")
 
     sent = {item["id"] for response in polls for item in response.json()["items"]}
-    assert polls, "the page never polled with updated_since"
+    assert polls, "the page never polled with changed_since"
     assert sent == set(new_ids)
 
 
@@ -158,7 +158,7 @@ def test_new_results_alone_redraw_the_page_without_reading_its_views_again(page,
     dashboard.store.add_trials([spec])
     read, polls = [], []
     page.on("request", lambda request: read.append(request.url) if VIEWS.search(request.url) else None)
-    page.on("response", lambda response: polls.append(response) if "updated_since=" in response.url else None)
+    page.on("response", lambda response: polls.append(response) if "changed_since=" in response.url else None)
     page.goto(dashboard.url(f"/studies/{study_id}"))
     page.wait_for_function(PLOTTED, arg="pareto-plot")
     page.wait_for_function("() => document.getElementById('progress-caption').textContent !== ''")

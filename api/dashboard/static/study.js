@@ -2,10 +2,10 @@
 // progress against simulations, parameters by generation, which parameters the experiment pins
 // down, the recommendation, and the pause/resume/cancel/export buttons. Runs that measured
 // nothing are drawn apart and counted by status in every plot (plots.js failureCounts).
-// Trials are loaded once, then polled incrementally with ?updated_since= (only what changed)
-// and upserted by id, so a running study costs one small request every few seconds. The
-// recommendation, progress and identifiability are read again only when the study changed
-// (its updated_at, generation or status: their versions), or one alone when its last answer was
+// Trials are loaded once, then polled incrementally with ?changed_since= (only what changed, by
+// the study's change number, which no writer's clock can skew) and upserted by id, so a running
+// study costs one small request every few seconds. The recommendation, progress and
+// identifiability are read again only when the study changed (its version), or one alone when its last answer was
 // a stale one (X-Demcal-View: the server builds a new version in the background and serves the
 // old one meanwhile), but not before the Retry-After a stale answer gave (identifiability rests
 // between builds: asked every poll meanwhile, it was a third of 50 dashboards' requests); new
@@ -29,16 +29,16 @@ const TERMINAL = new Set(["done", "cancelled", "failed"]);
 const trials = new Map();
 let study = null;
 let responses = []; // the experiments' responses with units (api.js experimentResponses)
-let cursor = null; // server_time of the last page: the next poll asks only for newer changes
+let cursor = null; // the study's change number at the last page: the next poll asks for later ones
 const VIEWS = ["recommendation", "progress", "identifiability"];
-let viewsRead = null; // the study's version (updated_at, generation, status) the views were read at
+let viewsRead = null; // the study's version the views were read at
 const views = {}; // each view's last answer: { body, current, retryAt } (current: not a stale version)
 
 // One request for the first page (it says how many match), then the rest in parallel.
 async function loadTrialChanges() {
   const query = (offset) => {
     const q = new URLSearchParams({ limit: PAGE, offset });
-    if (cursor) q.set("updated_since", cursor);
+    if (cursor !== null) q.set("changed_since", cursor);
     return `${base}/trials?${q}`;
   };
   const first = await api(query(0));
@@ -52,8 +52,8 @@ async function loadTrialChanges() {
     for (const t of itemsOf(page)) trials.set(t.id, t);
     changed += page.items.length;
   }
-  // The first page's server_time was taken before any page was read: nothing is missed.
-  cursor = first.server_time;
+  // The first page's change number was read before any page was: nothing is missed.
+  cursor = first.changes;
   return changed;
 }
 
@@ -357,7 +357,7 @@ async function refresh() {
   if (changed) await renderPlots();
   // Every view when the study changed; otherwise only those last answered with a stale version;
   // neither before the time a stale answer gave (the server would answer it again as it was).
-  const version = `${study.updated_at} ${study.progress.generation} ${study.status}`;
+  const version = study.version;
   const due = VIEWS.filter((name) => (version !== viewsRead || !views[name].current)
     && !(views[name] && Date.now() < views[name].retryAt));
   const answers = await Promise.all(due.map((name) => view(`${base}/${name}`)));
