@@ -114,26 +114,36 @@ def _gradient(u, w, c):
 
 
 @numba.njit(**JIT_FLAGS)
+def _free_minimum(c):
+    """(u, w, bowl): the stationary point of ``_gap``; bowl: it is its minimum (the Hessian is
+    positive definite)."""
+    gu, gw, quu, quw, qww = _gradient(0.0, 0.0, c)
+    det = quu * qww - quw * quw
+    if not det > 0.0:
+        return 0.0, 0.0, False
+    return -(qww * gu - quw * gw) / det, -(quu * gw - quw * gu) / det, True
+
+
+@numba.njit(**JIT_FLAGS)
+def _holds(poly, m, u, w):
+    """Whether the counter-clockwise polygon poly[:m] (m >= 3) holds (u, w) strictly (a polygon
+    without area holds nothing)."""
+    for a in range(m):
+        b = (a + 1) % m
+        if (poly[b, 0] - poly[a, 0]) * (w - poly[a, 1]) - (poly[b, 1] - poly[a, 1]) * (u - poly[a, 0]) <= 0.0:
+            return False
+    return True
+
+
+@numba.njit(**JIT_FLAGS)
 def _minimise(poly, m, c):
     """(u, w) minimising the convex quadratic ``_gap`` on the convex polygon (segment, point)
     poly[:m], counter-clockwise."""
     if m == 1:
         return poly[0, 0], poly[0, 1]
-    gu, gw, quu, quw, qww = _gradient(0.0, 0.0, c)
-    det = quu * qww - quw * quw
-    if m >= 3 and det > 0.0:
-        u = -(qww * gu - quw * gw) / det
-        w = -(quu * gw - quw * gu) / det
-        inside = True
-        for a in range(m):
-            b = (a + 1) % m
-            if (poly[b, 0] - poly[a, 0]) * (w - poly[a, 1]) - (poly[b, 1] - poly[a, 1]) * (
-                u - poly[a, 0]
-            ) <= 0.0:  # outside, or a polygon without area (collinear points)
-                inside = False
-                break
-        if inside:
-            return u, w
+    u, w, bowl = _free_minimum(c)
+    if m >= 3 and bowl and _holds(poly, m, u, w):
+        return u, w
     best = math.inf
     bu = poly[0, 0]
     bw = poly[0, 1]
@@ -248,9 +258,17 @@ def crowned_contact(va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work):
     ta, pua, pwa = _centre(pa, s_a, n, u, w)
     tb, pub, pwb = _centre(pb, s_b, n, u, w)
     c = (d, alpha_a, bua, bwa, ta, pua, pwa, ka, alpha_b, bub, bwb, tb, pub, pwb, kb)
+    # Two faces whose crowned gap is least inside both: that point is the minimiser on their
+    # overlap, which needs no clipping (the usual case of a face resting on a face).
+    fu, fw, bowl = _free_minimum(c)
+    free = flat_a and flat_b and ha >= 3 and hb >= 3 and bowl
+    free = free and _holds(work[0], ha, fu, fw) and _holds(work[1], hb, fu, fw)
     # Keep the hull that the clipping overwrites (in work[2]) for the tilt of the normal below.
     if not (flat_a and flat_b):  # curved features: their closest points
         m = 0
+        poly, hull_a, hull_b = work[0], work[0], work[1]
+    elif free:
+        m = -1
         poly, hull_a, hull_b = work[0], work[0], work[1]
     elif hb >= 3:
         for k in range(ha):
@@ -268,8 +286,8 @@ def crowned_contact(va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work):
         if ha == 2 and hb == 2:
             m = _parallel_segments(work[0], work[1], eps)
     ha_c = hb_c = -1.0
-    if m > 0:
-        cu, cw = _minimise(poly, m, c)
+    if m != 0:
+        cu, cw = (fu, fw) if m < 0 else _minimise(poly, m, c)
         ha_c = alpha_a + bua * cu + bwa * cw
         hb_c = alpha_b + bub * cu + bwb * cw
     slack = 1e-9 * tol + 1e-15
