@@ -219,6 +219,52 @@ def test_a_resting_view_is_not_asked_again_before_its_retry_after(page, dashboar
     assert page.errors == []
 
 
+def test_a_finished_study_is_polled_until_its_stale_views_are_current(page, dashboard, monkeypatch):
+    # The page stopped polling a finished study after one quiet round, so an identifiability view
+    # answered stale (resting between builds) when the study finished stayed stale on screen.
+    from api.services import progress
+
+    monkeypatch.setattr(progress, "IDENTIFIABILITY_REST", 200.0)  # x the build time: a short rest
+    study_id = running_study(dashboard, "finishing")
+    answers, polls = [], []  # (monotonic time, polls so far, X-Demcal-View, Retry-After); study polls' times
+
+    def seen(response) -> None:
+        if (match := VIEWS.search(response.url)) and match.group(1) == "identifiability":
+            headers = response.headers
+            view, retry_after = headers.get("x-demcal-view"), headers.get("retry-after")
+            answers.append((time.monotonic(), len(polls), view, retry_after))
+        elif response.url.endswith(f"/studies/{study_id}"):
+            polls.append(time.monotonic())
+
+    def wait_for(condition, within_s: float = 90.0) -> None:
+        deadline = time.monotonic() + within_s
+        while not condition():
+            assert time.monotonic() < deadline, "the page never got there"
+            page.wait_for_timeout(200)
+
+    page.on("response", seen)
+    page.goto(dashboard.url(f"/studies/{study_id}"), timeout=60_000)  # plotly's parse on a loaded machine
+    page.wait_for_function(
+        "() => document.getElementById('progress-caption').textContent !== ''", timeout=60_000
+    )
+    dashboard.store.save_generation(study_id, 1, b"synthetic", [], None, objectives={})
+    wait_for(lambda: len(answers) > 1 and answers[-1][2] == "current")  # rebuilt in the background; it rests
+    dashboard.store.save_generation(study_id, 2, b"synthetic", [], None, objectives={})
+    dashboard.store.set_status(study_id, StudyStatus.DONE)
+    wait_for(lambda: answers[-1][2] == "stale")
+    finished_at = len(answers) - 1
+    wait_for(lambda: answers[-1][2] == "current")
+    settled = len(polls)
+    page.wait_for_timeout(8000)  # more than two polling periods
+
+    assert len(polls) <= settled + 1  # it stopped once every view was current
+    later = answers[finished_at:]
+    for (asked_at, _, view, retry_after), (next_at, _, _, _) in zip(later, later[1:], strict=False):
+        if view == "stale" and retry_after:
+            assert next_at >= asked_at + int(retry_after) - 0.5  # not asked again before Retry-After
+    assert page.errors == []
+
+
 def test_pause_and_resume_buttons_change_the_study_through_the_api(page, dashboard):
     study_id = running_study(dashboard, "pausable")
     page.goto(dashboard.url(f"/studies/{study_id}"))

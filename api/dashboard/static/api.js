@@ -101,14 +101,16 @@ export function poll(task, ms) {
   let timer = null;
   let stopped = false;
   const run = async () => {
+    let wait = ms;
     try {
-      const keepGoing = await task();
-      if (keepGoing === false) return;
+      const next = await task(); // false: stop; a number: the ms until the next run; else ms
+      if (next === false) return;
+      if (typeof next === "number") wait = next;
     } catch (error) {
       if (!(error instanceof ApiError)) console.error(error);
       showBanner(`Could not refresh: ${error.message}`);
     }
-    if (!stopped) timer = setTimeout(run, document.hidden ? ms * 5 : ms);
+    if (!stopped) timer = setTimeout(run, document.hidden ? wait * 5 : wait);
   };
   run();
   return () => { stopped = true; clearTimeout(timer); };

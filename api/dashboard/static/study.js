@@ -9,7 +9,8 @@
 // a stale one (X-Demcal-View: the server builds a new version in the background and serves the
 // old one meanwhile), but not before the Retry-After a stale answer gave (identifiability rests
 // between builds: asked every poll meanwhile, it was a third of 50 dashboards' requests); new
-// trials alone redraw the recommendation's tables from the trials loaded.
+// trials alone redraw the recommendation's tables from the trials loaded. A finished study is
+// polled until a quiet round and every view current, a stale one asked after its Retry-After.
 
 import {
   ApiError, PARAMETERS, api, apiKey, clearBanner, el, experimentResponses, fmt, fmtTime, generationText,
@@ -369,8 +370,14 @@ async function refresh() {
     await renderProgress(views.progress.body, views.identifiability.body);
   }
   clearBanner();
-  // Keep polling a finished study only until one quiet round has confirmed the last changes.
-  return !(TERMINAL.has(study.status) && changed === 0);
+  // Keep polling a finished study until one quiet round has confirmed the last changes and every
+  // view it shows is current: a stale one (identifiability resting between builds) is asked for
+  // again once its Retry-After has passed, and no sooner.
+  if (!TERMINAL.has(study.status) || changed !== 0) return true;
+  const stale = VIEWS.filter((name) => !views[name].current);
+  if (!stale.length) return false;
+  const retryAt = Math.min(...stale.map((name) => views[name].retryAt));
+  return Math.max(POLL_MS, retryAt - Date.now());
 }
 
 async function act(action) {
