@@ -3,7 +3,7 @@ from the truth on the full feeder? Size and power of its permutation test, by st
 
 The populations are real full-feeder runs at 24 spheres per item: the truth's 20 runs (seeds
 1000-1009 and 5000-5009, ``benchmarks/full-feeder-truth-res24.json``) and the fresh and search
-runs of two sets the surrogate found (``benchmarks/full-feeder-calibration-res24.json``). Each
+runs of the sets the searches found (``benchmarks/full-feeder-calibration-res24.json``). Each
 draw takes 10 "measured" values from the truth's runs and n "fresh" values from a set's runs
 (with replacement) and applies the test at level 0.1; the share of ``not reproduced`` is the
 test's size for the truth and its power for the others. No simulation runs: a few seconds.
@@ -23,16 +23,18 @@ from optimizer.noise import anderson_darling_pairs, permutation_quantile, wasser
 from optimizer.study import NOISE_FLOOR_QUANTILE
 
 ROOT = Path(__file__).resolve().parent
+# W1 is the validation's statistic; Anderson-Darling the alternative it was compared with.
 STATISTICS = {"W1": wasserstein_pairs, "Anderson-Darling": anderson_darling_pairs}
 
 
 def populations() -> dict[str, list[int]]:
     truth = json.loads((ROOT / "full-feeder-truth-res24.json").read_text())["results"]
     found = {"truth (E 1e7, nu 0.3, e 0.3, mu 0.7)": [run["n_remaining"] for run in truth.values()]}
-    search = json.loads((ROOT / "full-feeder-calibration-res24.json").read_text())["methods"]["surrogate"]
-    for row in search["validated"]:
-        params = ", ".join(f"{k} {v:.2g}" for k, v in row["params"].items())
-        found[f"{row['role']} #{row['individual']} ({params})"] = row["n_remaining"]
+    methods = json.loads((ROOT / "full-feeder-calibration-res24.json").read_text())["methods"]
+    for method, search in methods.items():
+        for row in search.get("validated", []):
+            params = ", ".join(f"{k} {v:.2g}" for k, v in row["params"].items())
+            found[f"{method} {row['role']} #{row['individual']} ({params})"] = row["n_remaining"]
     return found
 
 

@@ -52,7 +52,8 @@ def anderson_darling_pairs(first: np.ndarray, second: np.ndarray) -> np.ndarray:
     form of Scholz and Stephens 1987 without midranks). Why beside W1: it weighs the CDFs' gap by
     1 / (H (1 - H)), so a difference in the tails (how large the jams are, how often the tray
     empties) counts more than W1 gives it, which is where a feeder set that clogs too hard
-    differs from the experiment."""
+    differs from the experiment. Compared with W1 as the validation's statistic in
+    ``benchmarks/validation_power.py``; the validation keeps W1 (``optimizer/validation.py``)."""
     first, second = np.atleast_2d(first).astype(float), np.atleast_2d(second).astype(float)
     n, m = first.shape[1], second.shape[1]
     pooled = np.concatenate([first, second], axis=1)

@@ -73,10 +73,10 @@ def test_an_aggregate_study_validates_by_its_median():
 
 
 # The full feeder at 24 spheres per item (benchmarks/full-feeder-truth-res24.json and
-# full-feeder-calibration-res24.json): the truth's 20 runs, and the 13 runs of a set found by the
-# surrogate whose jams are larger (median 15.5 on fresh seeds against the experiment's 4).
+# full-feeder-calibration-res24.json): the truth's 20 runs, and the 10 fresh runs of the set
+# NSGA-II recommended, which empties the tray too often (median 0.5 against the experiment's 4).
 FEEDER_TRUTH = [18, 13, 0, 16, 0, 7, 0, 12, 0, 1, 16, 12, 7, 0, 0, 7, 0, 8, 10, 13]
-FEEDER_LARGER_JAMS = [0, 0, 2, 13, 14, 17, 18, 18, 18, 22, 17, 0, 0]
+FEEDER_EMPTIES_TOO_OFTEN = [10, 3, 3, 0, 2, 0, 0, 1, 0, 0]
 
 
 def _rejection_rate(population, draws=600, seed=5) -> float:
@@ -94,9 +94,9 @@ def _rejection_rate(population, draws=600, seed=5) -> float:
     return rejected / draws
 
 
-def test_validation_on_a_bimodal_response_keeps_its_size_and_rejects_larger_jams_more_often():
-    """Anderson-Darling against the search's W1 as the permutation statistic, on these draws: both
-    call the truth ``not reproduced`` about one time in ten (0.107 and 0.112), but W1 rejects the
-    larger-jams set in 24 % of draws and Anderson-Darling in 36 % (sd of a rate: 0.02)."""
+def test_validation_on_a_bimodal_response_keeps_its_size_and_rejects_a_set_that_empties_too_often():
+    """W1 as the permutation statistic: the truth is ``not reproduced`` about one time in ten, the
+    set that empties too often in 70 % of draws; Anderson-Darling, tried instead, gave 52 % and
+    validated that set on its real fresh runs (benchmarks/validation_power.py)."""
     assert _rejection_rate(FEEDER_TRUTH) <= 0.14
-    assert _rejection_rate(FEEDER_LARGER_JAMS) >= 0.32
+    assert _rejection_rate(FEEDER_EMPTIES_TOO_OFTEN) >= 0.6
