@@ -181,6 +181,14 @@ def test_new_results_alone_redraw_the_page_without_reading_its_views_again(page,
     assert page.errors == []
 
 
+def wait_until(page, condition, within_s: float = 60.0) -> None:
+    """Let the page run until ``condition()`` holds, failing after ``within_s``."""
+    deadline = time.monotonic() + within_s
+    while not condition():
+        assert time.monotonic() < deadline, "the page never got there"
+        page.wait_for_timeout(200)
+
+
 def test_a_resting_view_is_not_asked_again_before_its_retry_after(page, dashboard, monkeypatch):
     # Identifiability rests between builds and is served stale meanwhile: pages that asked for it
     # at every poll until it changed made a third of 50 dashboards' requests (benchmarks/README.md,
@@ -198,21 +206,15 @@ def test_a_resting_view_is_not_asked_again_before_its_retry_after(page, dashboar
         elif response.url.endswith(f"/studies/{study_id}"):
             polls.append(response)
 
-    def wait_for(condition, within_s: float = 60.0) -> None:
-        deadline = time.monotonic() + within_s
-        while not condition():
-            assert time.monotonic() < deadline, "the page never got there"
-            page.wait_for_timeout(200)
-
     page.on("response", seen)
     page.goto(dashboard.url(f"/studies/{study_id}"))
     page.wait_for_function("() => document.getElementById('progress-caption').textContent !== ''")
     dashboard.store.save_generation(study_id, 1, b"synthetic", [], None, objectives={})
-    wait_for(lambda: len(answers) > 1 and answers[-1][1] == "current")  # rebuilt; now it rests
+    wait_until(page, lambda: len(answers) > 1 and answers[-1][1] == "current")  # rebuilt; now it rests
     dashboard.store.save_generation(study_id, 2, b"synthetic", [], None, objectives={})
-    wait_for(lambda: answers[-1][1] == "stale")
+    wait_until(page, lambda: answers[-1][1] == "stale")
     told_at, _, retry_after = answers[-1]
-    wait_for(lambda: len(polls) >= told_at + 3)  # two more polls
+    wait_until(page, lambda: len(polls) >= told_at + 3)  # two more polls
 
     assert int(retry_after) > 60
     assert [poll for poll, _, _ in answers if poll > told_at] == []
@@ -236,24 +238,19 @@ def test_a_finished_study_is_polled_until_its_stale_views_are_current(page, dash
         elif response.url.endswith(f"/studies/{study_id}"):
             polls.append(time.monotonic())
 
-    def wait_for(condition, within_s: float = 90.0) -> None:
-        deadline = time.monotonic() + within_s
-        while not condition():
-            assert time.monotonic() < deadline, "the page never got there"
-            page.wait_for_timeout(200)
-
     page.on("response", seen)
     page.goto(dashboard.url(f"/studies/{study_id}"), timeout=60_000)  # plotly's parse on a loaded machine
     page.wait_for_function(
         "() => document.getElementById('progress-caption').textContent !== ''", timeout=60_000
     )
     dashboard.store.save_generation(study_id, 1, b"synthetic", [], None, objectives={})
-    wait_for(lambda: len(answers) > 1 and answers[-1][2] == "current")  # rebuilt in the background; it rests
+    # rebuilt in the background; it rests
+    wait_until(page, lambda: len(answers) > 1 and answers[-1][2] == "current", within_s=90.0)
     dashboard.store.save_generation(study_id, 2, b"synthetic", [], None, objectives={})
     dashboard.store.set_status(study_id, StudyStatus.DONE)
-    wait_for(lambda: answers[-1][2] == "stale")
+    wait_until(page, lambda: answers[-1][2] == "stale", within_s=90.0)
     finished_at = len(answers) - 1
-    wait_for(lambda: answers[-1][2] == "current")
+    wait_until(page, lambda: answers[-1][2] == "current", within_s=90.0)
     settled = len(polls)
     page.wait_for_timeout(8000)  # more than two polling periods
 
