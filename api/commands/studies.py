@@ -1,10 +1,13 @@
-"""``demcal studies list|show|pause|resume|cancel|export``: manage studies in the database of
-``DEMCAL_DATABASE_URL`` without a server, as an admin key would through the API.
+"""``demcal studies list|show|pause|resume|cancel|export|archive|restore``: manage studies in the
+database of ``DEMCAL_DATABASE_URL`` without a server, as an admin key would through the API.
 
 The same services answer as the REST API (``api/services/``), so the status rules, messages and
 export format are the API's: pause from created/running, resume from paused, cancel from
 created/running/paused. A process driving the study (``serve`` or ``calibrate``) sees the
 change at its next step and withdraws the study's work.
+
+``archive`` writes a study and all its trials as one JSON file and ``restore`` puts it into
+another database (``api/store/archive.py``), where ``demcal calibrate --resume`` continues it.
 """
 
 from __future__ import annotations
@@ -91,6 +94,45 @@ def register(app: typer.Typer) -> None:
         else:
             output.write_text(text)
             typer.echo(f"{len(rows)} trials written to {output}")
+
+    @studies_app.command("archive")
+    def archive(
+        study_id: str,
+        output: Path = typer.Option(None, "--output", "-o", help="JSON file (default: STUDY_ID.json)."),
+    ) -> None:
+        """The study and every trial as one JSON file, to restore into another database."""
+        from api.errors import NotFoundError
+
+        try:
+            document = _store().archive_study(study_id)
+        except NotFoundError as exc:
+            _fail(exc.detail.split(";")[0] + "; list them with `demcal studies list`")
+        path = output or Path(f"{study_id}.json")
+        path.write_text(json.dumps(document, separators=(",", ":")))
+        typer.echo(f"{study_id}: {len(document['trials'])} trials written to {path}")
+
+    @studies_app.command("restore")
+    def restore(archive_file: Path) -> None:
+        """Put an archived study into this database; continue it with demcal calibrate --resume."""
+        from api.errors import ConflictError, InvalidInputError
+
+        try:
+            document = json.loads(archive_file.read_text())
+        except OSError as exc:
+            _fail(f"{archive_file}: {exc.strerror or exc}")
+        except ValueError as exc:
+            _fail(f"{archive_file} is not JSON ({exc}); give a file from `demcal studies archive`")
+        store = _store()
+        try:
+            study_id = store.restore_study(document)
+        except (ConflictError, InvalidInputError) as exc:
+            _fail(exc.detail)
+        study = store.load_study(study_id)
+        done = sum(1 for t in document["trials"] if t.get("state") == "done")
+        typer.echo(
+            f"{study_id}: restored, {study.status.value}, {done} of {len(document['trials'])} trials "
+            f"done; continue it with: demcal calibrate --resume {study_id}"
+        )
 
 
 def _read(study_id: str):

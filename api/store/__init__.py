@@ -8,7 +8,8 @@ What it must not do: decide business rules (which status transitions are allowed
 definition is: ``api/services/``), or know about HTTP.
 
 One module per resource, mixed into ``SqlStore``: ``studies``, ``trials`` (the driver's writes),
-``simulations``, ``shapes`` and ``reads`` (trial pages, summaries and counters for the API and
+``simulations``, ``shapes``, ``archive`` (a study as one JSON document, to move it between
+databases) and ``reads`` (trial pages, summaries and counters for the API and
 dashboard); ``base`` holds the session and the row conversions they share. ``leases`` (which
 process drives a study: ``DatabaseLeases``) stands apart, used by ``serve``'s driver loop and
 ``calibrate``.
@@ -16,6 +17,7 @@ process drives a study: ``DatabaseLeases``) stands apart, used by ``serve``'s dr
 
 from __future__ import annotations
 
+from api.store.archive import StudyArchives
 from api.store.base import ALL_OWNERS, Page, new_id
 from api.store.reads import TRIAL_READ_COLUMNS, DashboardReads, TrialFilter
 from api.store.shapes import ShapeStore
@@ -26,5 +28,5 @@ from api.store.trials import TrialStore
 __all__ = ["ALL_OWNERS", "TRIAL_READ_COLUMNS", "Page", "SqlStore", "TrialFilter", "new_id"]
 
 
-class SqlStore(StudyStore, TrialStore, SimulationStore, ShapeStore, DashboardReads):
+class SqlStore(StudyArchives, StudyStore, TrialStore, SimulationStore, ShapeStore, DashboardReads):
     """The store of studies, trials, shapes and single simulations in one SQL database."""

@@ -284,3 +284,71 @@ def test_single_simulation_moves_pending_queued_done_once(store):
     assert recorded == [True, False]
     assert (row.state, row.n_remaining, row.result["n_remaining"]) == ("done", 2, 2)
     assert store.pending_simulations() == []
+
+
+def test_an_archived_study_restored_into_another_database_finishes_as_the_original(
+    store, tmp_path, sqlite_template
+):
+    """Archive a study mid-generation on one SQLite file, restore it into the fixture's database
+    (SQLite or PostgreSQL), and both copies, driven to the end, give the same trials, results and
+    recommendation; what was in flight comes back pending, the running study paused."""
+    import json
+    import shutil
+
+    from api.db import create_db_engine
+    from api.store import SqlStore
+
+    shutil.copy(sqlite_template, tmp_path / "source.db")
+    source = SqlStore(create_db_engine(f"sqlite:///{tmp_path / 'source.db'}"))
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 6, "offspring": 3, "generations": 2}, seed=3)
+    )
+    study_id = source.create_study(definition.model_dump(mode="json"), owner="alice")
+    driver = Driver(source, SyntheticExecutor(per_poll=2))
+    while len([r for r in source.trials(study_id) if r.state is TrialState.DONE]) < 7:
+        driver.step(study_id, timeout=0)
+    in_flight = [r.spec.trial_id for r in source.trials(study_id) if r.state is not TrialState.DONE]
+    source.mark_running(in_flight[0], worker="w1")
+
+    archive = json.loads(json.dumps(source.archive_study(study_id)))
+    restored_id = store.restore_study(archive)
+
+    restored = store.load_study(restored_id)
+    original = source.load_study(study_id)
+    assert restored_id == study_id
+    assert (original.status, restored.status) == (StudyStatus.RUNNING, StudyStatus.PAUSED)
+    assert restored.ga_state == original.ga_state and restored.generation == original.generation == 1
+    assert {r.spec.trial_id: r.result for r in store.trials(study_id)} == {
+        r.spec.trial_id: r.result for r in source.trials(study_id)
+    }
+    pending = {r.spec.trial_id for r in store.trials(study_id) if r.state is TrialState.PENDING}
+    assert pending == set(in_flight)
+    assert [r.spec for r in store.trials(study_id)] == [r.spec for r in source.trials(study_id)]
+
+    store.set_status(study_id, StudyStatus.RUNNING)
+    ends = [
+        Driver(s, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0) for s in (source, store)
+    ]
+    assert [p.status for p in ends] == [StudyStatus.DONE, StudyStatus.DONE]
+    assert ends[0].recommendation == ends[1].recommendation is not None
+    assert {r.spec.trial_id: r.result for r in store.trials(study_id)} == {
+        r.spec.trial_id: r.result for r in source.trials(study_id)
+    }
+
+
+def test_restoring_a_study_twice_or_a_foreign_document_is_refused(store):
+    from api.errors import ConflictError, InvalidInputError
+
+    study_id = store.create_study(_definition(), owner=None)
+    store.add_trials(_specs(study_id, 2))
+    archive = store.archive_study(study_id)
+
+    with pytest.raises(ConflictError, match="already in this database"):
+        store.restore_study(archive)
+    with pytest.raises(InvalidInputError, match="not a study archive"):
+        store.restore_study({"trials": []})
+    future = {**archive, "study": {**archive["study"], "colour": "red"}}
+    with pytest.raises(InvalidInputError, match=r"does not know \(colour\)"):
+        store.restore_study(future)
+    with pytest.raises(NotFoundError):
+        store.archive_study("st-nope")

@@ -37,7 +37,7 @@ def test_list_and_show_read_the_database(cli):
 
     assert listed.exit_code == 0, listed.output
     assert study_id in listed.output and "laptop" in listed.output and "0/14" in listed.output
-    assert json.loads(shown.output)["status"] == "created"
+    assert json.loads(shown.stdout)["status"] == "created"
 
 
 def test_pause_resume_cancel_follow_the_apis_rules(cli):
@@ -62,3 +62,31 @@ def test_export_writes_the_trials_csv_and_an_unknown_id_exits_2(cli, tmp_path):
     assert exported.exit_code == 0, exported.output
     assert (tmp_path / "t.csv").read_text().startswith("trial_id,generation,individual")
     assert unknown.exit_code == 2 and "demcal studies list" in unknown.output
+
+
+def test_archive_then_restore_moves_a_study_to_another_database(cli, tmp_path, monkeypatch):
+    from api.db import upgrade_database
+    from api.settings import get_settings
+
+    runner, store, study_id = cli
+    store.set_status(study_id, store.load_study(study_id).status.RUNNING)
+    archived = runner.invoke(app, ["studies", "archive", study_id, "-o", str(tmp_path / "a.json")])
+    (tmp_path / "other").mkdir()
+    monkeypatch.setenv("DEMCAL_DATABASE_URL", f"sqlite:///{tmp_path}/other/demcal.db")
+    get_settings.cache_clear()
+    upgrade_database(f"sqlite:///{tmp_path}/other/demcal.db")
+
+    restored = runner.invoke(app, ["studies", "restore", str(tmp_path / "a.json")])
+    again = runner.invoke(app, ["studies", "restore", str(tmp_path / "a.json")])
+    (tmp_path / "x.json").write_text("[1, 2")
+    not_json = runner.invoke(app, ["studies", "restore", str(tmp_path / "x.json")])
+    missing = runner.invoke(app, ["studies", "restore", str(tmp_path / "nope.json")])
+    shown = runner.invoke(app, ["studies", "show", study_id])
+
+    assert archived.exit_code == 0 and "0 trials written" in archived.output, archived.output
+    assert restored.exit_code == 0, restored.output
+    assert f"demcal calibrate --resume {study_id}" in restored.output
+    assert json.loads(shown.stdout)["status"] == "paused" and json.loads(shown.stdout)["name"] == "laptop"
+    assert again.exit_code == 2 and "already in this database" in again.output
+    assert not_json.exit_code == 2 and "not JSON" in not_json.output
+    assert missing.exit_code == 2 and "nope.json" in missing.output
