@@ -91,7 +91,17 @@ def _rounded_pair_geometry(bodies, spheres, pairs, which):
         if which == 0:
             axis, simplex = pairs.axis[p].copy(), pairs.simplex[p].copy()
             r = pair_geometry(
-                va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, simplex, spheres.work
+                va,
+                a,
+                ra,
+                _crown(spheres.crown, i),
+                vb,
+                b,
+                rb,
+                _crown(spheres.crown, j),
+                axis,
+                simplex,
+                spheres.work,
             )
             from_gjk += r[0]
             continue
@@ -102,10 +112,10 @@ def _rounded_pair_geometry(bodies, spheres, pairs, which):
             r = crowned_contact(
                 va,
                 a,
-                _crown(spheres, i),
+                _crown(spheres.crown, i),
                 vb,
                 b,
-                _crown(spheres, j),
+                _crown(spheres.crown, j),
                 (ax, ay, az),
                 (bx, by, bz),
                 tol,
@@ -136,7 +146,7 @@ def _rounded_facet_geometry(bodies, spheres, walls, wall_pairs):
             facets.offset[f],
         )
         r = facet_geometry(
-            spheres.core, core, spheres.rounding[i], _crown(spheres, i), tri_flat, facet, spheres.work
+            spheres.core, core, spheres.rounding[i], _crown(spheres.crown, i), tri_flat, facet, spheres.work
         )
         total += r[0]
     return total

@@ -69,6 +69,31 @@ def place(start, count, rot, pos):
     )
 
 
+@numba.njit(inline="always", **JIT_FLAGS)
+def place_body(start, count, rot, pos, b):
+    """``place`` for body b of the bodies' rotation (n, 3, 3) and position (n, 3) tables, read in
+    place: the row views ``rot[b]`` and ``pos[b]`` would each cost an atomic reference count."""
+    return Core(
+        np.int64(start),
+        np.int64(count),
+        (
+            (rot[b, 0, 0], rot[b, 0, 1], rot[b, 0, 2]),
+            (rot[b, 1, 0], rot[b, 1, 1], rot[b, 1, 2]),
+            (rot[b, 2, 0], rot[b, 2, 1], rot[b, 2, 2]),
+        ),
+        (pos[b, 0], pos[b, 1], pos[b, 2]),
+    )
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def at_point(row):
+    """The one-vertex ``Core`` of a point given in world coordinates (row ``row`` of its array):
+    a sphere's centre."""
+    return Core(
+        np.int64(row), np.int64(1), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), (0.0, 0.0, 0.0)
+    )
+
+
 def scratch() -> np.ndarray:
     """The work array ``contact_patch`` needs."""
     return np.zeros((6, MAX_FEATURE, 3))

@@ -46,7 +46,7 @@ from dem.contact import (
     shared_overlap,
     sphere_contact_force,
 )
-from dem.convex import place
+from dem.convex import at_point, place_body
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
 from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS
@@ -204,6 +204,13 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
     """
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
     rounding, core_count = spheres.rounding, spheres.core_count
+    core, core_start, crown, work, rot = (
+        spheres.core,
+        spheres.core_start,
+        spheres.crown,
+        spheres.work,
+        bodies.rot,
+    )
     active, pos, vel, omega, force, torque = (
         bodies.active,
         bodies.pos,
@@ -237,8 +244,30 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
                 pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
             continue
         if core_count[i] > 0 or core_count[j] > 0:
-            delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww = _rounded_pair(
-                i, j, bodies, spheres, pairs.axis[p], pairs.simplex[p]
+            # The pieces' cores (a plain sphere is a one-vertex core at its centre), written out
+            # here on the arrays at hand: a helper given arrays or the containers costs an atomic
+            # reference count up and down for each (25 for Bodies and Spheres), which was a third
+            # of a polyhedron step.
+            if core_count[i] > 0:
+                va, a = core, place_body(core_start[i], core_count[i], rot, pos, sbody[i])
+            else:
+                va, a = x, at_point(i)
+            if core_count[j] > 0:
+                vb, b = core, place_body(core_start[j], core_count[j], rot, pos, sbody[j])
+            else:
+                vb, b = x, at_point(j)
+            delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww = pair_geometry(
+                va,
+                a,
+                rounding[i],
+                _crown(crown, i),
+                vb,
+                b,
+                rounding[j],
+                _crown(crown, j),
+                pairs.axis[p],
+                pairs.simplex[p],
+                work,
             )
             if delta <= 0.0:
                 pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
@@ -344,31 +373,10 @@ def _sphere_pair_force(p, g, single, rows, n, delta, bodies, spheres, pairs, his
     _push(force, torque, bb, -fx, -fy, -fz, rbx, rby, rbz)
 
 
-@numba.njit(**JIT_FLAGS)
-def _rounded_pair(i, j, bodies, spheres, axis, simplex):
-    """Contact of sphere rows i and j when one of them is a rounded-polyhedron piece (a plain
-    sphere is a one-vertex core at its centre): ``dem.rounded_contact.pair_geometry``."""
-    ba, bb = spheres.body[i], spheres.body[j]
-    core, start, count = spheres.core, spheres.core_start, spheres.core_count
-    if count[i] > 0:
-        va, a = core, place(start[i], count[i], bodies.rot[ba], bodies.pos[ba])
-    else:
-        va, a = spheres.x, place(i, 1, spheres.eye, spheres.zero)
-    if count[j] > 0:
-        vb, b = core, place(start[j], count[j], bodies.rot[bb], bodies.pos[bb])
-    else:
-        vb, b = spheres.x, place(j, 1, spheres.eye, spheres.zero)
-    ra, rb = spheres.rounding[i], spheres.rounding[j]
-    return pair_geometry(
-        va, a, ra, _crown(spheres, i), vb, b, rb, _crown(spheres, j), axis, simplex, spheres.work
-    )
-
-
-@numba.njit(**JIT_FLAGS)
-def _crown(spheres, i):
-    """Sphere row i's crown as a 3-tuple (``dem/crown.py``)."""
-    c = spheres.crown
-    return c[i, 0], c[i, 1], c[i, 2]
+@numba.njit(inline="always", **JIT_FLAGS)
+def _crown(crown, i):
+    """Row i of the spheres' crown table as a 3-tuple (``dem/crown.py``)."""
+    return crown[i, 0], crown[i, 1], crown[i, 2]
 
 
 @numba.njit(**JIT_FLAGS)
@@ -420,7 +428,7 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
             continue
         if spheres.core_count[i] > 0:
             b = sbody[i]
-            core = place(spheres.core_start[i], spheres.core_count[i], bodies.rot[b], pos[b])
+            core = place_body(spheres.core_start[i], spheres.core_count[i], bodies.rot, pos, b)
             normal = facets.normal
             facet = WallFacet(
                 facets.tri_start[f],
@@ -430,7 +438,13 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                 facets.offset[f],
             )
             delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face = facet_geometry(
-                spheres.core, core, spheres.rounding[i], _crown(spheres, i), tri_flat, facet, spheres.work
+                spheres.core,
+                core,
+                spheres.rounding[i],
+                _crown(spheres.crown, i),
+                tri_flat,
+                facet,
+                spheres.work,
             )
             if delta <= 0.0:
                 continue
