@@ -130,13 +130,13 @@ def placed(verts, core, k):
     )
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def support(verts, core, dx, dy, dz):
     """World position of the vertex of ``core`` (rows of ``verts``) furthest along d."""
     return placed(verts, core, support_row(verts, core, dx, dy, dz))
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _keep(simplex, lam, idx0, idx1, idx2, k):
     """Reduce the simplex (rows: w, a, b stacked in columns 0:3, 3:6, 6:9, and the vertex rows of
     a and b in columns 9 and 10) to rows idx*, which increase (row r comes from a row >= r):
@@ -150,7 +150,7 @@ def _keep(simplex, lam, idx0, idx1, idx2, k):
     return k
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _closest_segment(s, lam):
     """Closest point to the origin of segment rows 0-1; reduces the simplex; returns its size."""
     ex, ey, ez = s[1, 0] - s[0, 0], s[1, 1] - s[0, 1], s[1, 2] - s[0, 2]
@@ -401,7 +401,7 @@ def gjk_distance(va, a, vb, b, simplex=None):
     return d, ax, ay, az, bx, by, bz
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _project(verts, core, n, u, w, sign, out):
     """Every vertex of a shape in the frame (u, w, sign*n) into out: its projections on u and w
     and its height along sign*n."""
@@ -420,7 +420,7 @@ def _project(verts, core, n, u, w, sign, out):
         out[k, 2] = sign * (x * nx + y * ny + z * nz)
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _feature(proj, count, tol, out):
     """The projected vertices (``_project``) within tol of their supporting plane, their column 2
     ``tol - height above the plane``; returns how many (at most MAX_FEATURE)."""
@@ -438,12 +438,12 @@ def _feature(proj, count, tol, out):
     return m
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _cross2(o, a, b):
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _copy_row(dst, i, src, j):
     dst[i, 0], dst[i, 1], dst[i, 2] = src[j, 0], src[j, 1], src[j, 2]
 

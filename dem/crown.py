@@ -35,7 +35,7 @@ from dem.conf import JIT_FLAGS
 from dem.convex import _clip, _copy_row, _parallel_segments, feature_hulls, plane_basis
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _height_fit(pts, m, tol):
     """(alpha, beta_u, beta_w, flat): the linear height above the supporting plane over a
     feature's hull pts[:m] (column 2 holds tol - height): a plane fitted to its vertices, a line
@@ -76,7 +76,7 @@ def _height_fit(pts, m, tol):
     return alpha, bu, bw, flat
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _centre(p, s, n, u, w):
     """(t, pu, pw): a shape's centre p in the contact frame (n, u, w: 3-tuples), t = the
     supporting plane's height s above it along n."""
@@ -87,7 +87,7 @@ def _centre(p, s, n, u, w):
     )
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _gap(u, w, c):
     """Crowned gap at (u, w): c = (d, alpha_a, bu_a, bw_a, t_a, pu_a, pw_a, kappa_a, same for b)
     (t = offset of the feature's height from the centre's along n; see ``crowned_contact``)."""
@@ -100,7 +100,7 @@ def _gap(u, w, c):
     return c[0] + ha + hb + phi_a + phi_b
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _gradient(u, w, c):
     """Gradient of ``_gap`` at (u, w), and its (constant) Hessian (q_uu, q_uw, q_ww)."""
     za = c[4] + c[1] + c[2] * u + c[3] * w
@@ -113,7 +113,7 @@ def _gradient(u, w, c):
     return gu, gw, quu, quw, qww
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _free_minimum(c):
     """(u, w, bowl): the stationary point of ``_gap``; bowl: it is its minimum (the Hessian is
     positive definite)."""
@@ -124,7 +124,7 @@ def _free_minimum(c):
     return -(qww * gu - quw * gw) / det, -(quu * gw - quw * gu) / det, True
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _holds(poly, m, u, w):
     """Whether the counter-clockwise polygon poly[:m] (m >= 3) holds (u, w) strictly (a polygon
     without area holds nothing)."""
@@ -165,7 +165,7 @@ def _minimise(poly, m, c):
     return bu, bw
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _inside(poly, m, u, w, eps):
     """Whether (u, w) lies inside the counter-clockwise polygon poly[:m] by more than eps."""
     if m < 3:
@@ -178,7 +178,7 @@ def _inside(poly, m, u, w, eps):
     return True
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _along(seg, u, w, eps):
     """(eu, ew, inside): unit direction of segment seg[:2] and whether (u, w) projects inside it
     by more than eps."""
