@@ -23,7 +23,8 @@ of their cores:
 A shape travels as its vertex array and a ``Core`` (which rows, and their placement as plain
 numbers: a tuple holding arrays costs numba reference counting on every call, which measured 20 %
 of a GJK query), points and directions as 3-tuples. Pure numba functions; the scratch array
-``work`` (6, MAX_FEATURE, 3) keeps them free of allocation.
+``work`` (7, MAX_FEATURE, 3) keeps them free of allocation (work[6] is a caller's: the plane's
+triangle of ``dem.rounded_contact``).
 """
 
 from __future__ import annotations
@@ -96,7 +97,7 @@ def at_point(row):
 
 def scratch() -> np.ndarray:
     """The work array ``contact_patch`` needs."""
-    return np.zeros((6, MAX_FEATURE, 3))
+    return np.zeros((7, MAX_FEATURE, 3))
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -219,14 +220,16 @@ def _closest_triangle(s, lam):
 
 @numba.njit(**JIT_FLAGS)
 def _closest_tetrahedron(s, lam):
-    """Closest point to the origin of tetrahedron rows 0-3; 4 (and lam unset) if it holds the origin."""
+    """Closest point to the origin of tetrahedron rows 0-3; 4 (and lam unset) if it holds the origin.
+    Scratch in the caller's arrays (no allocation per call): s rows 4-6 the best face, 7-9 the
+    face at hand; lam 4-7 and 8-11 their weights."""
     faces = ((0, 1, 2, 3), (0, 1, 3, 2), (0, 2, 3, 1), (1, 2, 3, 0))
     best = np.inf
     best_face = -1
     best_k = 0
-    tri = np.empty((3, _COLUMNS))
-    blam = np.zeros(4)
-    tlam = np.zeros(4)
+    tri = s[7:10]
+    tlam = lam[4:8]
+    blam = lam[8:12]
     for f in range(4):
         a, b, c, o = faces[f]
         abx, aby, abz = s[b, 0] - s[a, 0], s[b, 1] - s[a, 1], s[b, 2] - s[a, 2]
@@ -321,8 +324,8 @@ def gjk_distance(va, a, vb, b, simplex=None):
     Without it GJK starts from the support points along the line of the centres.
     """
     pa, pb = a.pos, b.pos
-    s = np.zeros((7, _COLUMNS))  # rows 0-3 the simplex, 4-6 scratch for the tetrahedron case
-    lam = np.zeros(4)
+    s = np.zeros((10, _COLUMNS))  # rows 0-3 the simplex, 4-9 scratch for the tetrahedron case
+    lam = np.zeros(12)  # 0-3 the simplex's weights, 4-11 scratch for the tetrahedron case
     k = 0
     if simplex is not None:
         k = _warm_start(va, a, vb, b, simplex, s, lam)

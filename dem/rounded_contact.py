@@ -30,7 +30,7 @@ an inner edge can be pinned to that edge (a triangle's closest points on its edg
 tilted normal), which the plane does not do. A core is a vertex array and a
 ``dem.convex.Core``, a crown a 3-tuple, a facet the wall's triangle array and a ``WallFacet``.
 Pure numba; the only allocations are a facet contact's per-triangle table (each triangle's GJK
-once for its three passes) and its patch sums, or the plane's triangle.
+once for its three passes) and its patch sums (the plane's triangle is scratch: ``work[6]``).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
-from dem.convex import Core, contact_patch, gjk_distance, plane_basis, support
+from dem.convex import Core, contact_patch, gjk_distance, placed, plane_basis, support
 from dem.crown import crowned_contact
 from dem.facets import closest_point_on_triangle
 
@@ -70,10 +70,25 @@ def _triangle(facet, t):
 
 @numba.njit(**JIT_FLAGS)
 def _extent(verts, core, nx, ny, nz):
-    """(min, max) of the placed vertices' projections on n."""
-    hx, hy, hz = support(verts, core, nx, ny, nz)
-    lx, ly, lz = support(verts, core, -nx, -ny, -nz)
-    return lx * nx + ly * ny + lz * nz, hx * nx + hy * ny + hz * nz
+    """(min, max) of the placed vertices' projections on n, and the lowest vertex (3-tuple): the
+    support queries along -n and n in one pass over the vertices, with the same vertices (the
+    first of equals) and so the same figures as ``support``."""
+    start, count, rot, _ = core
+    r0, r1, r2 = rot
+    bx = r0[0] * nx + r1[0] * ny + r2[0] * nz
+    by = r0[1] * nx + r1[1] * ny + r2[1] * nz
+    bz = r0[2] * nx + r1[2] * ny + r2[2] * nz
+    low, high = np.inf, -np.inf
+    k_low = k_high = start
+    for v in range(start, start + count):
+        h = verts[v, 0] * bx + verts[v, 1] * by + verts[v, 2] * bz
+        if h > high:
+            high, k_high = h, v
+        if h < low:  # -h > -low: support's test along -n
+            low, k_low = h, v
+    hx, hy, hz = placed(verts, core, k_high)
+    lx, ly, lz = placed(verts, core, k_low)
+    return lx * nx + ly * ny + lz * nz, hx * nx + hy * ny + hz * nz, (lx, ly, lz)
 
 
 @numba.njit(**JIT_FLAGS)
@@ -164,21 +179,22 @@ def _inside_facet(tri, facet, box):
 
 
 @numba.njit(**JIT_FLAGS)
-def _plane_geometry(va, a, ra, crown_a, facet, box, work):
+def _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work):
     """``facet_geometry`` where the features of core ``a`` that can touch lie over the inside of
     the facet: its contact is that with the facet's plane, n the facet's normal, d the height of
-    the core's lowest vertex, and no GJK. The crowned contact and the patch are taken against
-    one triangle of the plane large enough to hold the core's footprint (``_footprint``)."""
+    the core's lowest vertex (``lowest``, a 3-tuple), and no GJK. The crowned contact and the
+    patch are taken against one triangle of the plane large enough to hold the core's footprint
+    (``_footprint``)."""
     nx, ny, nz = facet.normal
     dx, dy, dz = facet.disp
     plane = facet.offset + nx * dx + ny * dy + nz * dz
-    ax, ay, az = support(va, a, -nx, -ny, -nz)
+    ax, ay, az = lowest
     d = ax * nx + ay * ny + az * nz - plane
     tol = 4.0 * crown_a[2]
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
     cu, cw = 0.5 * (box[0] + box[1]), 0.5 * (box[2] + box[3])
     size = 4.0 * (math.sqrt((box[1] - box[0]) ** 2 + (box[3] - box[2]) ** 2) + ra)
-    big = np.empty((3, 3))  # an equilateral triangle about the footprint, inradius = size / 2
+    big = work[6]  # rows 0-2: an equilateral triangle about the footprint, inradius = size / 2
     for c in range(3):
         angle = 2.0 * math.pi * c / 3.0
         pu, pw = cu + size * math.cos(angle), cw + size * math.sin(angle)
@@ -249,7 +265,7 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     disp, normal, offset = facet.disp, facet.normal, facet.offset
     t_start, t_count = facet.start, facet.count
     shift = normal[0] * disp[0] + normal[1] * disp[1] + normal[2] * disp[2]
-    lo, hi = _extent(va, a, normal[0], normal[1], normal[2])
+    lo, hi, lowest = _extent(va, a, normal[0], normal[1], normal[2])
     if lo - (offset + shift) > ra or (offset + shift) - hi > ra:
         return -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
     tol = 4.0 * crown_a[2]
@@ -258,7 +274,7 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
         # of the facet: the facet is a plane for them.
         box = _footprint(va, a, facet, ra + tol - (lo - offset - shift))
         if _inside_facet(tri, facet, box):
-            return _plane_geometry(va, a, ra, crown_a, facet, box, work)
+            return _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work)
     # Each triangle's distance and closest points, computed once for the three passes below. A
     # triangle farther than ra + tol from the ball about the body's centre that holds the core
     # cannot hold the contact (its crowned distance is at least its distance): no GJK for it.
