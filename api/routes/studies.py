@@ -20,18 +20,18 @@ from api.schemas import (
     StudyRead,
 )
 from api.services import progress, studies, trials
-from api.services.views import Served, etag
+from api.services.views import Served
 from optimizer.protocols import StudyStatus
 from optimizer.study import StudyDefinition
 
 router = APIRouter(prefix="/api/v1/studies", tags=["studies"])
 
 
-def cached_json(request: Request, served: Served) -> Response:
-    """A polled view's JSON with an ETag (its version, ``views.etag``) and ``Cache-Control:
-    no-cache``, so that a browser asks again each time with ``If-None-Match`` and a view it holds
-    at the current version comes back as an empty 304 (the dashboard's fetch does this by itself),
-    answered from the version alone.
+def cached_json(served: Served) -> Response:
+    """A polled view's JSON with an ETag (its version and a digest of its bytes, ``views.etag``) and
+    ``Cache-Control: no-cache``, so that a browser asks again each time with ``If-None-Match`` and a
+    view it holds comes back as an empty 304 (the dashboard's fetch does this by itself), decided by
+    ``views.serve(..., held=)``.
 
     ``X-Demcal-View`` says whether the view is of the study's current version or a stale one
     served while the current one builds (progress, identifiability): the dashboard asks for a
@@ -39,13 +39,13 @@ def cached_json(request: Request, served: Served) -> Response:
     304s too, because a cache keeps a stored header the 304 does not replace. A stale view whose
     next build rests (identifiability) also says in ``Retry-After`` how many seconds pass at least
     before a newer version can be ready: the dashboard does not ask for it again before."""
-    tag = etag(served.version)
     headers = {
-        "ETag": tag, "Cache-Control": "no-cache", "X-Demcal-View": "current" if served.current else "stale",
+        "ETag": served.etag, "Cache-Control": "no-cache",
+        "X-Demcal-View": "current" if served.current else "stale",
     }
     if not served.current and served.retry_after_s is not None:
         headers["Retry-After"] = str(max(1, math.ceil(served.retry_after_s)))
-    if tag in request.headers.get("if-none-match", ""):
+    if served.not_modified:
         return Response(status_code=status.HTTP_304_NOT_MODIFIED, headers=headers)
     return Response(served.body, media_type="application/json", headers=headers)
 
@@ -77,7 +77,7 @@ def get_study(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """A study with its progress (trials done / total, generation) and best trial so far."""
-    return cached_json(request, studies.study_json(store, views, study_id, principal, held(request)))
+    return cached_json(studies.study_json(store, views, study_id, principal, held(request)))
 
 
 @router.post("/{study_id}/pause", response_model=StudyRead)
@@ -105,7 +105,7 @@ def pareto_front(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """The current Pareto front (f1 = |N_t - target|, f2 = computation time), best f1 first."""
-    return cached_json(request, trials.pareto_front_json(store, views, study_id, principal, held(request)))
+    return cached_json(trials.pareto_front_json(store, views, study_id, principal, held(request)))
 
 
 @router.get("/{study_id}/generations", response_model=list[GenerationSummary])
@@ -119,7 +119,7 @@ def study_progress(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """Hypervolume, best f1 and best validated f1 against simulations, one point per completed batch."""
-    return cached_json(request, progress.progress_json(store, views, study_id, principal, held(request)))
+    return cached_json(progress.progress_json(store, views, study_id, principal, held(request)))
 
 
 @router.get("/{study_id}/identifiability", response_model=IdentifiabilityRead)
@@ -128,7 +128,7 @@ def identifiability(
 ):
     """Which searched parameters the experiment pins down, from the spread of the matching sets."""
     served = progress.identifiability_json(store, views, study_id, principal, held(request))
-    return cached_json(request, served)
+    return cached_json(served)
 
 
 @router.get("/{study_id}/recommendation", response_model=RecommendationRead)
@@ -136,7 +136,7 @@ def recommendation(
     study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
 ):
     """The recommended parameter set and every other set that matches the experiment as well."""
-    return cached_json(request, trials.recommendation_json(store, views, study_id, principal, held(request)))
+    return cached_json(trials.recommendation_json(store, views, study_id, principal, held(request)))
 
 
 @router.get(

@@ -2,9 +2,9 @@
 seconds but changes once per generation, so its JSON is kept and served as bytes until the study
 row changes.
 
-The version of a view is the study row's ``(updated_at, generation)``: every write that can change
-the front (``save_generation``: Pareto flags, objectives and the generation, in one transaction)
-also updates the study row, and the row is read anyway to check that the caller may see it. Each
+The version of a view is one of the study's change numbers: every write that can change the
+front (``save_generation``: Pareto flags, objectives and the generation, in one transaction) also
+changes the study row, and the row is read anyway to check that the caller may see it. Each
 server process keeps its own cache; they agree because the version comes from the database.
 
 A view is built once per version, whatever the number of requests asking for it meanwhile
@@ -30,18 +30,21 @@ that rests, when a newer version can be ready at the earliest (the rest left plu
 duration: ``Retry-After``): a page asking every poll for a view that rests was a third of the
 requests of 50 polling dashboards (session 6).
 
-A view's ETag is its version (``etag``), a number the database hands out (the study's change
-numbers, ``api/models.py``), not a hash of its bytes: a client that holds the current version
+A view's ETag is its version, a number the database hands out (the study's change numbers,
+``api/models.py``), and a digest of its bytes (``etag``). A client that holds the current version
 (``If-None-Match``) is answered before the cache is even looked at (``serve(..., held=)``), by any
-server process. Under 50 polling dashboards with two DEM workers, the study read that answered
-that 304 still found its view under the cache's lock, hashed its bytes (a recommendation is
-~100 kB) and, after each trial write, rebuilt it first (benchmarks/README.md, session 7).
+server process. One that holds an older version whose bytes are those of the current one (the
+study row changed, the view did not: a recommendation, ~100 kB, after a batch was queued) is
+answered from the digest, and its 304 carries the new ETag, which the client keeps: with the version
+alone, such views were sent again after every change of the study (benchmarks/README.md,
+sessions 7 and 8).
 
 What it must not do: decide what a view contains (``api/services/trials.py`` does).
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import threading
 import time
@@ -60,20 +63,43 @@ log = logging.getLogger(__name__)
 class Served:
     """A view's bytes, and whether they are of the version asked for (False: an older one, served
     while the asked version builds or its build rests); for a stale one whose build rests, the
-    seconds before a newer version can be ready."""
+    seconds before a newer version can be ready. ``not_modified``: the client holds these bytes
+    (``held``), the answer is a 304 with no body."""
 
     body: bytes
     current: bool
     retry_after_s: float | None = None
-    version: Hashable = None  # of the body: its ETag (``etag``)
+    etag: str = ""
+    not_modified: bool = False
 
 
-def etag(version: Hashable) -> str:
-    """The ETag of a view's ``version`` (a number, or a tuple of them). Weak: two server processes
-    may build one version at moments a little apart, and their bytes need not be equal; both are
-    of that version, which is what a conditional GET asks."""
+def etag(version: Hashable, digest: str) -> str:
+    """The ETag of a view's ``version`` (a number, or a tuple of them) whose bytes have ``digest``.
+    Weak: two server processes may build one version at moments a little apart, and their bytes
+    need not be equal; both are of that version, which is what a conditional GET asks."""
     parts = version if isinstance(version, tuple) else (version,)
-    return 'W/"' + "-".join(str(part) for part in parts) + '"'
+    return 'W/"' + "-".join(str(part) for part in parts) + "." + digest + '"'
+
+
+DIGEST_CHARS = 16  # hex
+
+
+def _digest(body: bytes) -> str:
+    return hashlib.blake2b(body, digest_size=DIGEST_CHARS // 2).hexdigest()
+
+
+def _held_at(held: str, version: Hashable) -> str | None:
+    """The ETag in ``held`` (an ``If-None-Match``) that names ``version``, if any (it is sent back:
+    only a well-formed one)."""
+    prefix = etag(version, "")[:-1]  # W/"<version>.
+    start = held.find(prefix)
+    if start < 0:
+        return None
+    tag = held[start:start + len(prefix) + DIGEST_CHARS + 1]
+    digest = tag[len(prefix):-1]
+    if tag.endswith('"') and len(digest) == DIGEST_CHARS and all(c in "0123456789abcdef" for c in digest):
+        return tag
+    return None
 
 
 class StudyViewCache:
@@ -82,7 +108,8 @@ class StudyViewCache:
     def __init__(self, max_entries: int = 512, max_kept: int = 32) -> None:
         self.max_entries = max_entries
         self.max_kept = max_kept  # kept objects may be large (progress keeps a study's records)
-        self._entries: OrderedDict[tuple[str, str], tuple[Hashable, bytes]] = OrderedDict()
+        # (view, study id) -> (version, bytes, their digest)
+        self._entries: OrderedDict[tuple[str, str], tuple[Hashable, bytes, str]] = OrderedDict()
         self._building: dict[tuple[str, str, Hashable], Future] = {}
         self._refreshing: set[tuple[str, str]] = set()  # (view, study id) built in the background
         self._kept: OrderedDict[tuple[str, str], object] = OrderedDict()
@@ -102,16 +129,19 @@ class StudyViewCache:
         """The view at ``version``: cached, or built now (requests for one version wait for one
         build); with ``stale_ok`` and an older version cached, that one, while the asked version
         builds in the background, ``rest`` times the previous build's duration after it ended.
-        ``held``, a client's ``If-None-Match``: if it names ``version``, no view at all (an empty
-        body: the client has it, the answer is a 304)."""
-        if held is not None and etag(version) in held:
-            return Served(b"", True, version=version)
+        ``held``, a client's ``If-None-Match``: if it names ``version``, no view at all (the client
+        has it, the answer is a 304 with the ETag it sent); if it names the digest of the bytes
+        served, a 304 with their ETag."""
+        if held is not None:
+            tag = _held_at(held, version)
+            if tag is not None:
+                return Served(b"", True, etag=tag, not_modified=True)
         key = (view, study_id)
         with self._lock:
             entry = self._entries.get(key)
             if entry is not None and entry[0] == version:
                 self._entries.move_to_end(key)
-                return Served(entry[1], True, version=version)
+                return self._served(entry, True, None, held)
             if stale_ok and entry is not None:
                 now = time.monotonic()
                 resting_s = self._resting.get(key, 0.0) - now
@@ -129,10 +159,18 @@ class StudyViewCache:
                 threading.Thread(
                     target=self._refresh, args=(key, version, build, rest), name=f"view-{view}", daemon=True
                 ).start()
-            return Served(entry[1], False, retry_after_s, entry[0])
+            return self._served(entry, False, retry_after_s, held)
         if mine:
             self._build(key, version, build, pending)
-        return Served(pending.result(), True, version=version)
+        return self._served(pending.result(), True, None, held)
+
+    @staticmethod
+    def _served(
+        entry: tuple[Hashable, bytes, str], current: bool, retry_after_s: float | None, held: str | None
+    ) -> Served:
+        version, body, digest = entry
+        same = held is not None and "." + digest + '"' in held
+        return Served(b"" if same else body, current, retry_after_s, etag(version, digest), same)
 
     def kept(self, view: str, study_id: str, make: Callable[[], T]) -> T:
         """The object ``view`` keeps for ``study_id`` between builds (made on first use); past
@@ -159,10 +197,11 @@ class StudyViewCache:
             with self._lock:
                 self._building.pop((*key, version), None)
             return
+        entry = (version, body, _digest(body))
         with self._lock:
-            self._store(key, version, body)
+            self._store(key, entry)
             self._building.pop((*key, version), None)
-        done.set_result(body)
+        done.set_result(entry)
 
     def _refresh(
         self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes], rest: float
@@ -175,17 +214,18 @@ class StudyViewCache:
         except Exception:
             log.exception("building view %s of study %s failed", *key)
             body = None
+        entry = None if body is None else (version, body, _digest(body))
         ended = time.monotonic()
         with self._lock:
-            if body is not None:
-                self._store(key, version, body)
+            if entry is not None:
+                self._store(key, entry)
             if rest > 0:
                 self._resting[key] = ended + rest * (ended - started)
                 self._took[key] = ended - started
             self._refreshing.discard(key)
 
-    def _store(self, key: tuple[str, str], version: Hashable, body: bytes) -> None:
-        self._entries[key] = (version, body)
+    def _store(self, key: tuple[str, str], entry: tuple[Hashable, bytes, str]) -> None:
+        self._entries[key] = entry
         self._entries.move_to_end(key)
         while len(self._entries) > self.max_entries:
             evicted, _ = self._entries.popitem(last=False)
