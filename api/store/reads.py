@@ -205,6 +205,17 @@ class DashboardReads(StoreBase):
                     by_status[status] = by_status.get(status, 0) + int(n)
         return by_state, by_status
 
+    def trial_states(self, study_id: str, since: int | None = None) -> list[sa.Row]:
+        """(id, state, status, change_number) of a study's trials written after the change number
+        ``since`` (all of them without): what a tally of its states kept between reads needs."""
+        query = sa.select(TrialRow.id, TrialRow.state, TrialRow.status, TrialRow.change_number).where(
+            TrialRow.study_id == study_id
+        )
+        if since is not None:
+            query = query.where(TrialRow.change_number > since)
+        with self.session() as s:
+            return list(s.execute(query))
+
     def study_status_counts(self) -> dict[str, int]:
         with self.session() as s:
             return {
