@@ -295,7 +295,8 @@ async def load(
     kinds = ["study", "trials", "recommendation", "progress", "identifiability"] if dashboard else [
         "pareto", "trials"]
     latencies: dict[str, list[float]] = {kind: [] for kind in kinds}
-    errors = not_modified = 0
+    errors = 0
+    not_modified = dict.fromkeys(kinds, 0)
     # A dashboard is a browser of its own, with up to 6 connections to the host (Chromium's limit);
     # with one a client, its 3 view reads at a version change queued in the clients' shared pool.
     connections = (6 if dashboard else 1) * len(clients)
@@ -306,7 +307,7 @@ async def load(
         connection the server closed while the client was thinking is retried once by httpx only.
         With ``cache`` (a page's), it revalidates what it has as a browser does: If-None-Match with
         the ETag it was sent, and a 304 means the cached body."""
-        nonlocal errors, not_modified
+        nonlocal errors
         start = time.perf_counter()
         sent = dict(headers)
         if cache is not None and path in cache:
@@ -322,7 +323,9 @@ async def load(
             retry = float(response.headers.get("retry-after", 0)) if stale else 0.0
             cache[("retry", path)] = time.monotonic() + retry if retry > 0 else 0.0
         if response.status_code == 304 and cache is not None and path in cache:
-            not_modified += 1
+            not_modified[kind] += 1
+            # A browser's cache keeps the 304's ETag (a view whose version moved, not its bytes).
+            cache[path] = (response.headers.get("etag", cache[path][0]), cache[path][1])
             return cache[path][1]
         if response.status_code != 200:
             errors += 1
@@ -380,7 +383,8 @@ async def load(
         await asyncio.gather(*(client_loop(i, client, warm_stop) for i in clients))
         for values in latencies.values():
             values.clear()
-        errors = not_modified = 0
+        errors = 0
+        not_modified = dict.fromkeys(kinds, 0)
         client_cpu = time.process_time()
         started = time.monotonic()
         stop = started + seconds
@@ -423,7 +427,8 @@ def measure(base: str, study_id: str, token: str, args, probe) -> dict:
         "latencies": {kind: [v for part in parts for v in part["latencies"][kind]] for kind in kinds},
         "elapsed": max(part["elapsed"] for part in parts), "server": _spent(before, after),
         "dem_cpu_s": probed, "lags": [lag for part in parts for lag in part["lags"]],
-        **{name: sum(part[name] for part in parts) for name in ("errors", "not_modified", "client_cpu_s")},
+        "not_modified": {kind: sum(part["not_modified"][kind] for part in parts) for kind in kinds},
+        **{name: sum(part[name] for part in parts) for name in ("errors", "client_cpu_s")},
     }
 
 
@@ -545,11 +550,13 @@ def main() -> None:
         print(
             f"  {kind:7s} n={len(values):6d}  p50={_percentile(values, 50) * 1000:7.1f} ms  "
             f"p99={_percentile(values, 99) * 1000:7.1f} ms"
+            + (f"  304s {result['not_modified'][kind]:5d}" if args.dashboard and kind != "all" else "")
             + (f"  (in the server: p50 {_percentile(own, 50) * 1000:.1f} ms, p99 "
                f"{_percentile(own, 99) * 1000:.1f} ms)" if own else "")
         )
     print(f"  throughput {len(everything) / result['elapsed']:.0f} req/s, errors {result['errors']}, "
-          f"304 not modified {result['not_modified']}")
+          f"304 not modified {sum(result['not_modified'].values())} "
+          f"({sum(result['not_modified'].values()) / max(len(everything), 1):.0%})")
     server = result["server"]
     requests = sum(server["requests"].values())
     per_kind = ", ".join(
