@@ -17,7 +17,7 @@ come faster than a build ends would otherwise each start one, and the builds wou
 they took every core (the next poll after a build ends starts the one for the latest version).
 
 A view may also keep an object between its builds (``kept``): progress folds only the batches
-completed since its previous build.
+completed since its previous build, the study read counts only the trials written since.
 
 A background build may also be made to rest (``rest``): after a build that took t seconds, the
 next one of that view and study starts no sooner than ``rest * t`` after it ended, so the view
