@@ -396,7 +396,11 @@ def _wall_approach_rate(bodies, b, wall_v, point, delta, n):
 def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
     """Sphere-facet contacts: geometry, then the edge/vertex rule, then per body the overlap sum
     of each facet, then forces with the law of the body's and the wall's materials. Returns
-    (contacts carrying force, offending body or -1)."""
+    (contacts carrying force, offending body or -1).
+
+    The geometry pass lists the touching pairs (``wall_pairs.touching``, in list order) and
+    clears the springs of the others; the rule and the forces run over that list only: most
+    listed pairs of a moving wall (found with twice its amplitude as margin) do not touch."""
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
     active, mass, diameter = bodies.active, bodies.mass, bodies.diameter
     pos, vel, omega, force, torque = bodies.pos, bodies.vel, bodies.omega, bodies.force, bodies.torque
@@ -410,23 +414,23 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
     f_wall = facets.wall
     wp_i, wp_f, wp_hist = wall_pairs.i, wall_pairs.f, wall_pairs.hist
     wp_delta, wp_n, wp_cp, wp_keep = wall_pairs.delta, wall_pairs.normal, wall_pairs.point, wall_pairs.keep
+    touching = wall_pairs.touching
     n_contacts = 0
     n_wp = wall_pairs.count[N_PAIRS]
+    n_touch = 0
     tri_flat = facets.tri.reshape((-1, 3))
     for p in range(n_wp):
         i, f = wp_i[p], wp_f[p]
         wp_delta[p] = -1.0
         wp_keep[p] = False
-        if not active[sbody[i]]:
-            continue
         w = f_wall[f]
-        r2 = radius[i] * radius[i]
-        s = plane_distance(
-            x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
-        )
-        if s * s >= r2 * PLANE_SLACK:
-            continue
-        if spheres.core_count[i] > 0:
+        apart = not active[sbody[i]]
+        if not apart:
+            s = plane_distance(
+                x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
+            )
+            apart = s * s >= radius[i] * radius[i] * PLANE_SLACK
+        if not apart and spheres.core_count[i] > 0:
             b = sbody[i]
             core = place_body(spheres.core_start[i], spheres.core_count[i], bodies.rot, pos, b)
             normal = facets.normal
@@ -446,46 +450,58 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                 facet,
                 spheres.work,
             )
-            if delta <= 0.0:
+            if delta > 0.0:
+                if dist == 0.0 or delta > lim * spheres.rounding[i]:
+                    return n_contacts, b
+                wp_delta[p] = delta
+                wp_n[p, 0], wp_n[p, 1], wp_n[p, 2] = nx, ny, nz
+                # The patch centre on the facet (the mid-plane point moved back by d / 2).
+                wp_cp[p, 0] = cx - 0.5 * dist * nx
+                wp_cp[p, 1] = cy - 0.5 * dist * ny
+                wp_cp[p, 2] = cz - 0.5 * dist * nz
+                wall_pairs.moment[p, 0], wall_pairs.moment[p, 1], wall_pairs.moment[p, 2] = s_uu, s_uw, s_ww
+                wp_keep[p] = is_face
+                touching[n_touch] = p
+                n_touch += 1
                 continue
-            if dist == 0.0 or delta > lim * spheres.rounding[i]:
-                return n_contacts, b
-            wp_delta[p] = delta
-            wp_n[p, 0], wp_n[p, 1], wp_n[p, 2] = nx, ny, nz
-            # The patch centre on the facet (the mid-plane point moved back by d / 2).
-            wp_cp[p, 0] = cx - 0.5 * dist * nx
-            wp_cp[p, 1] = cy - 0.5 * dist * ny
-            wp_cp[p, 2] = cz - 0.5 * dist * nz
-            wall_pairs.moment[p, 0], wall_pairs.moment[p, 1], wall_pairs.moment[p, 2] = s_uu, s_uw, s_ww
-            wp_keep[p] = is_face
-            continue
-        d2, cx, cy, cz, is_face = closest_point_on_facet(
-            x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
-        )
-        if d2 >= r2:
-            continue
-        d = math.sqrt(d2)
-        delta = radius[i] - d
-        if delta > lim * radius[i] or d == 0.0:
-            return n_contacts, sbody[i]
-        wp_delta[p] = delta
-        wp_n[p, 0], wp_n[p, 1], wp_n[p, 2] = (x[i, 0] - cx) / d, (x[i, 1] - cy) / d, (x[i, 2] - cz) / d
-        wp_cp[p, 0], wp_cp[p, 1], wp_cp[p, 2] = cx, cy, cz
-        wp_keep[p] = is_face  # face contacts always count; edge/vertex ones are checked next
+            apart = True
+        if not apart:
+            d2, cx, cy, cz, is_face = closest_point_on_facet(
+                x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
+            )
+            if d2 < radius[i] * radius[i]:
+                d = math.sqrt(d2)
+                delta = radius[i] - d
+                if delta > lim * radius[i] or d == 0.0:
+                    return n_contacts, sbody[i]
+                wp_delta[p] = delta
+                wp_n[p, 0] = (x[i, 0] - cx) / d
+                wp_n[p, 1] = (x[i, 1] - cy) / d
+                wp_n[p, 2] = (x[i, 2] - cz) / d
+                wp_cp[p, 0], wp_cp[p, 1], wp_cp[p, 2] = cx, cy, cz
+                wp_keep[p] = is_face  # face contacts always count; edge/vertex ones are checked next
+                touching[n_touch] = p
+                n_touch += 1
+                continue
+        # Only a spring that held something is reset: untouched memory stays clean.
+        if wp_hist[p, 0] != 0.0 or wp_hist[p, 1] != 0.0 or wp_hist[p, 2] != 0.0:
+            wp_hist[p, 0] = wp_hist[p, 1] = wp_hist[p, 2] = 0.0
     # Edge/vertex contacts (keep False, delta > 0): keep unless their point lies on another
     # touched facet of the same wall that is at least as close (see dem/walls.py).
-    p = 0
-    while p < n_wp:
-        q_end = p
-        while q_end < n_wp and wp_i[q_end] == wp_i[p]:
-            q_end += 1
-        i = wp_i[p]
+    t = 0
+    while t < n_touch:
+        t_end = t
+        while t_end < n_touch and wp_i[touching[t_end]] == wp_i[touching[t]]:
+            t_end += 1
+        i = wp_i[touching[t]]
         tol = 1e-9 + 1e-6 * radius[i]
-        for a in range(p, q_end):
-            if wp_delta[a] <= 0.0 or wp_keep[a]:
+        for ta in range(t, t_end):
+            a = touching[ta]
+            if wp_keep[a]:
                 continue
             dup = False
-            for c in range(p, q_end):
+            for tc in range(t, t_end):
+                c = touching[tc]
                 if c == a or wp_delta[c] <= 0.0 or f_wall[wp_f[c]] != f_wall[wp_f[a]]:
                     continue
                 closer = wp_delta[c] > wp_delta[a] + tol
@@ -509,37 +525,40 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                     break
             if dup:
                 wp_delta[a] = -1.0
-        for a in range(p, q_end):
+        for ta in range(t, t_end):
+            a = touching[ta]
             wp_keep[a] = wp_delta[a] > 0.0
             if not wp_keep[a]:
                 wp_hist[a, 0] = wp_hist[a, 1] = wp_hist[a, 2] = 0.0
-        p = q_end
+        t = t_end
 
     # The law's constants depend on the body's and the wall's materials and the body's size and
     # mass only: computed when these change from one contact to the next (two square roots).
     law_mb = law_mw = -1
     law_d = law_m = -1.0
     law = PairLaw(0.0, 0.0, 0.0, 0.0, 0.0)
-    p = 0
-    while p < n_wp:
-        b = sbody[wp_i[p]]
-        q_end = p
-        while q_end < n_wp and sbody[wp_i[q_end]] == b:
-            q_end += 1
+    t = 0
+    while t < n_touch:
+        b = sbody[wp_i[touching[t]]]
+        t_end = t
+        while t_end < n_touch and sbody[wp_i[touching[t_end]]] == b:
+            t_end += 1
         # One sphere's pairs have distinct facets: each facet's group is that one contact, which
         # carries the whole law (``_contact_normal_force``), so its sums are not needed.
-        single = wp_i[p] == wp_i[q_end - 1]
+        single = wp_i[touching[t]] == wp_i[touching[t_end - 1]]
         if not single:
-            for a in range(p, q_end):
+            for ta in range(t, t_end):
                 for k in range(N_SUMS):
-                    facet_sum[wp_f[a], k] = 0.0
-            for a in range(p, q_end):
+                    facet_sum[wp_f[touching[ta]], k] = 0.0
+            for ta in range(t, t_end):
+                a = touching[ta]
                 if wp_keep[a]:
                     nx, ny, nz = wp_n[a, 0], wp_n[a, 1], wp_n[a, 2]
                     w_v = wall_vel[f_wall[wp_f[a]]]
                     rate = _wall_approach_rate(bodies, b, w_v, wp_cp[a], wp_delta[a], (nx, ny, nz))
                     _add_sums(facet_sum, wp_f[a], wp_delta[a], rate)
-        for a in range(p, q_end):
+        for ta in range(t, t_end):
+            a = touching[ta]
             if not wp_keep[a]:
                 continue
             f = wp_f[a]
@@ -557,7 +576,12 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
             rax, ray, raz = cx - pos[b, 0], cy - pos[b, 1], cz - pos[b, 2]
             vbx, vby, vbz = _point_velocity(vel, omega, b, rax, ray, raz)
             v = (vbx - wall_vel[w, 0], vby - wall_vel[w, 1], vbz - wall_vel[w, 2])
-            f_n, f_pair, weight = _contact_normal_force(facet_sum, f, single, delta, v, (nx, ny, nz), law)
+            # ``single`` passed as a constant: the lone contact's law compiles without the
+            # shared-overlap branch (as in ``_sphere_pair_force``).
+            if single:
+                f_n, f_pair, weight = _contact_normal_force(facet_sum, f, True, delta, v, (nx, ny, nz), law)
+            else:
+                f_n, f_pair, weight = _contact_normal_force(facet_sum, f, False, delta, v, (nx, ny, nz), law)
             fx, fy, fz = sphere_contact_force((nx, ny, nz), f_n, f_pair, v, weight, law, wp_hist, a, hist_dt)
             _push(force, torque, b, fx, fy, fz, rax, ray, raz)
             if spheres.core_count[wp_i[a]] > 0:
@@ -568,5 +592,5 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                 )
                 _twist(torque, b, tx, ty, tz)
             n_contacts += 1
-        p = q_end
+        t = t_end
     return n_contacts, -1

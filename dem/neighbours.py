@@ -90,6 +90,7 @@ class WallPairs(NamedTuple):
     point: np.ndarray  # (capacity, 3) scratch of the force pass: closest point on the facet
     keep: np.ndarray  # (capacity,) bool scratch of the force pass: the contact carries force
     moment: np.ndarray  # (capacity, 3) scratch of the force pass: a piece's patch moments
+    touching: np.ndarray  # (capacity,) int32 scratch of the force pass: the touching pairs, in order
 
 
 class Neighbours(NamedTuple):
@@ -193,6 +194,7 @@ def _wall_pairs(capacity: int, old: WallPairs | None) -> WallPairs:
         np.zeros((capacity, 3)),
         np.zeros(capacity, dtype=np.bool_),
         np.zeros((capacity, 3)),
+        np.zeros(capacity, dtype=_INDEX),
     )
 
 
