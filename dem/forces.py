@@ -193,14 +193,16 @@ def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_lim
 def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
     """Sphere-sphere contacts. Returns (contacts carrying force, offending body or -1).
 
-    A body pair with one listed sphere pair (two plain spheres: every pair of a sphere packing)
-    carries its whole law, so its force is applied in the first pass over the list. The others
-    need their group's sums first: the first pass keeps their geometry and adds their
-    ``share_sums`` (and count) to the group's, the second applies their forces (skipped when
-    there are none); a group with one touching contact carries the whole law there too. One pass
-    over the list per step is what keeps a large packing's cost per pair flat once its lists no
-    longer fit the cache. ``delta`` is kept for every pair (-1
-    when apart): ``Simulation.current_overlap`` reads it.
+    A scan of the whole list, without branches, first lists the pairs that need work (touching,
+    or holding a spring to clear) in ``pairs.touch``: about half of a settled packing's listed
+    pairs touch, and deciding that inside the force loop cost a mispredicted jump a pair (10,140
+    settling spheres: 883 -> 732 us a pass). A body pair with one listed sphere pair (two plain
+    spheres: every pair of a sphere packing) carries its whole law, so its force is applied in the
+    first pass over those. The others need their group's sums first: the first pass keeps their
+    geometry and adds their ``share_sums`` (and count) to the group's, the second applies their
+    forces (skipped when there are none); a group with one touching contact carries the whole law
+    there too. ``delta`` is kept for every pair (-1 when apart): ``Simulation.current_overlap``
+    reads it.
     """
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
     rounding, core_count = spheres.rounding, spheres.core_count
@@ -224,15 +226,32 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
     n_contacts = 0
     n_deferred = 0
     n_pp = pairs.count[N_PAIRS]
+    # The pairs that need work: touching, or holding a spring to clear. Branch-free, so that a
+    # packing's half-touching pairs cost no mispredicted jumps here.
+    touch = pairs.touch
+    n_touch = 0
     for p in range(n_pp):
         i, j = pp_i[p], pp_j[p]
+        dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+        rs = radius[i] + radius[j]
+        pp_delta[p] = -1.0
+        touch[n_touch] = p
+        n_touch += (
+            (dx * dx + dy * dy + dz * dz < rs * rs)
+            | (pp_hist[p, 0] != 0.0)
+            | (pp_hist[p, 1] != 0.0)
+            | (pp_hist[p, 2] != 0.0)
+        )
+    zeroed = -1
+    for t in range(n_touch):
+        p = touch[t]
+        i, j = pp_i[p], pp_j[p]
         g = pp_group[p]
-        first = p == 0 or pp_group[p - 1] != g
-        single = first and (p == n_pp - 1 or pp_group[p + 1] != g)
-        if first and not single:
+        single = (p == 0 or pp_group[p - 1] != g) and (p == n_pp - 1 or pp_group[p + 1] != g)
+        if not single and g != zeroed:
             for k in range(N_SUMS):
                 grp_sum[g, k] = 0.0
-        pp_delta[p] = -1.0
+            zeroed = g
         if not (active[sbody[i]] and active[sbody[j]]):
             continue
         dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
@@ -307,7 +326,8 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
         n_deferred += 1
     if n_deferred == 0:
         return n_contacts, -1
-    for p in range(n_pp):
+    for t in range(n_touch):
+        p = touch[t]
         delta = pp_delta[p]
         if delta <= 0.0:
             continue

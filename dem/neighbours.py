@@ -73,6 +73,7 @@ class SpherePairs(NamedTuple):
     point: np.ndarray  # (capacity, 3) scratch of the force pass: a piece pair's contact point
     moment: np.ndarray  # (capacity, 3) scratch of the force pass: its patch's second moments
     simplex: np.ndarray  # (capacity, SIMPLEX) int32 rounded pieces: last GJK simplex (any is valid)
+    touch: np.ndarray  # (capacity,) int32 scratch of the force pass: the pairs it works on, in order
 
 
 class WallPairs(NamedTuple):
@@ -175,6 +176,7 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
         np.zeros((capacity, 3)),
         np.zeros((capacity, 3)),
         np.zeros((capacity, SIMPLEX), dtype=_INDEX),
+        np.zeros(capacity, dtype=_INDEX),
     )
 
 
