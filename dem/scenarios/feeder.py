@@ -253,7 +253,11 @@ class _FeederRun:
         """After each chunk: remove discharged items, record times, write snapshots, report."""
         t = float(sim.t)
         active = np.asarray(sim.bodies.active)
-        for i in np.flatnonzero(self.state == 1):
+        on_tray = np.flatnonzero(self.state == 1)
+        # All items' x in one call (row by row the same sums): this runs after every chunk, and a
+        # call per item was 0.15 ms of Python a chunk, 1 s of a 65 s feeder run.
+        tray_x = self.tray.to_tray_frame(np.asarray(sim.bodies.pos)[self.body_of[on_tray]])[:, 0]
+        for i, x in zip(on_tray, tray_x, strict=True):
             b = self.body_of[i]
             if not active[b]:
                 # The engine removed it for leaving the domain other than through the outlet.
@@ -261,7 +265,6 @@ class _FeederRun:
                 self.discharge_times[i] = t
                 self.escaped.append(int(i))
                 continue
-            x = self.tray.to_tray_frame(np.asarray(sim.bodies.pos[b])[None, :])[0, 0]
             if x > self.tray.outlet_x:
                 self.state[i] = 2
                 self.discharge_times[i] = t
