@@ -214,7 +214,7 @@ def _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work):
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww, True
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
     """Contact of rounded shapes A and B (cores ``a`` and ``b`` of the vertex arrays va and vb,
     rounding radii ``ra`` and ``rb``, crowns ``crown_*``): ``(delta, d, nx, ny, nz, cx, cy, cz,
@@ -234,6 +234,15 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
         gap = (lx * axis[0] + ly * axis[1] + lz * axis[2]) - (hx * axis[0] + hy * axis[1] + hz * axis[2])
         if gap > reach:
             return reach - gap, gap, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    return _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work)
+
+
+@numba.njit(**JIT_FLAGS)
+def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
+    """``pair_geometry`` past the cached axis, which is inlined in its callers: most listed pairs
+    end at that test, and each array passed to a compiled call costs an atomic reference count
+    up and down."""
+    reach = ra + rb
     d, ax, ay, az, bx, by, bz = gjk_distance(va, a, vb, b, simplex)
     if d > 0.0:
         axis[0], axis[1], axis[2] = (ax - bx) / d, (ay - by) / d, (az - bz) / d
