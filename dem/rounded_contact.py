@@ -126,11 +126,12 @@ def _shared(tri, facet, t, c):
 
 
 @numba.njit(**JIT_FLAGS)
-def _footprint(va, a, facet, reach):
+def _footprint(va, a, facet, reach, pts):
     """The box (u_min, u_max, w_min, w_max), in ``plane_basis`` of the facet's normal and the
     wall's reference position, of the vertices of core ``a`` at most ``reach`` above its lowest
     one along the normal (one pass: a vertex is taken against the lowest seen so far, so the box
-    may hold a few more)."""
+    may hold a few more), and how many those vertices are: their (u, w) in pts[:m, :2], the
+    lowest first."""
     nx, ny, nz = facet.normal
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
     r0, r1, r2 = a.rot
@@ -138,17 +139,38 @@ def _footprint(va, a, facet, reach):
     low = np.inf
     u0 = w0 = np.inf
     u1 = w1 = -np.inf
+    m = 0
     for v in range(a.start, a.start + a.count):
         x = px + r0[0] * va[v, 0] + r0[1] * va[v, 1] + r0[2] * va[v, 2]
         y = py + r1[0] * va[v, 0] + r1[1] * va[v, 1] + r1[2] * va[v, 2]
         z = pz + r2[0] * va[v, 0] + r2[1] * va[v, 1] + r2[2] * va[v, 2]
         h = x * nx + y * ny + z * nz
+        lowest = h < low
         low = min(low, h)
         if h <= low + reach:
             cu, cw = x * ux + y * uy + z * uz, x * wx + y * wy + z * wz
             u0, u1, w0, w1 = min(u0, cu), max(u1, cu), min(w0, cw), max(w1, cw)
+            if lowest and m > 0:  # keep the lowest first
+                pts[m, 0], pts[m, 1] = pts[0, 0], pts[0, 1]
+                pts[0, 0], pts[0, 1] = cu, cw
+            else:
+                pts[m, 0], pts[m, 1] = cu, cw
+            m += 1
     margin = 1e-9 * (u1 - u0 + w1 - w0) + 1e-12  # rounding: an edge touching the box counts
-    return u0 - margin, u1 + margin, w0 - margin, w1 + margin
+    return (u0 - margin, u1 + margin, w0 - margin, w1 + margin), m
+
+
+@numba.njit(**JIT_FLAGS)
+def _line_clears(p, q, pts, m, margin):
+    """Whether the points pts[:m] (u, w) all lie on one side of the line through p and q
+    (2-tuples), further than margin: then the segment p-q misses their convex hull."""
+    eu, ew = q[0] - p[0], q[1] - p[1]
+    length = math.sqrt(eu * eu + ew * ew)
+    lo, hi = np.inf, -np.inf
+    for k in range(m):
+        side = (eu * (pts[k, 1] - p[1]) - ew * (pts[k, 0] - p[0])) / length
+        lo, hi = min(lo, side), max(hi, side)
+    return lo > margin or hi < -margin
 
 
 @numba.njit(**JIT_FLAGS)
@@ -158,19 +180,28 @@ def _in_plane(tri, k, ux, uy, uz, wx, wy, wz):
 
 
 @numba.njit(**JIT_FLAGS)
-def _inside_facet(tri, facet, box):
-    """Whether the box (``_footprint``) lies inside the facet (triangles of ``tri`` at the
-    reference position): its centre is on the facet and no boundary edge of the facet meets it."""
+def _inside_facet(tri, facet, box, pts, m):
+    """Whether the convex hull of the footprint (``_footprint``: its box, and its m points in pts)
+    lies inside the facet (triangles of ``tri`` at the reference position): no boundary edge of
+    the facet meets it, and its lowest point is on the facet. An edge meets the hull only if it
+    meets the box and the points lie on both sides of the edge's line: the box alone turned away
+    a piece whose box's corner reached over an edge oblique to the plane's axes (a piece beside
+    the tray's converging walls), which then took the facet's triangles one by one."""
     nx, ny, nz = facet.normal
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
-    cu, cw = 0.5 * (box[0] + box[1]), 0.5 * (box[2] + box[3])
+    cu, cw = pts[0, 0], pts[0, 1]
+    margin = 1e-9 * (box[1] - box[0] + box[3] - box[2]) + 1e-12
     on_facet = False
     for t in range(facet.start, facet.start + facet.count):
         sides = 0
         for c in range(3):
             p = _in_plane(tri, 3 * t + c, ux, uy, uz, wx, wy, wz)
             q = _in_plane(tri, 3 * t + (c + 1) % 3, ux, uy, uz, wx, wy, wz)
-            if _segment_meets_box(p, q, box) and not _shared(tri, facet, t, c):
+            if (
+                _segment_meets_box(p, q, box)
+                and not _shared(tri, facet, t, c)
+                and not _line_clears(p, q, pts, m, margin)
+            ):
                 return False
             side = (q[0] - p[0]) * (cw - p[1]) - (q[1] - p[1]) * (cu - p[0])
             sides += 1 if side >= 0.0 else (-1 if side <= 0.0 else 0)
@@ -281,8 +312,8 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     if lo > offset + shift:
         # The features that can touch (at most ra + tol above the lowest vertex) over the inside
         # of the facet: the facet is a plane for them.
-        box = _footprint(va, a, facet, ra + tol - (lo - offset - shift))
-        if _inside_facet(tri, facet, box):
+        box, m = _footprint(va, a, facet, ra + tol - (lo - offset - shift), work[6])
+        if _inside_facet(tri, facet, box, work[6], m):
             return _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work)
     # Each triangle's distance and closest points, computed once for the three passes below. A
     # triangle farther than ra + tol from the ball about the body's centre that holds the core

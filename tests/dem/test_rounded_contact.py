@@ -79,9 +79,32 @@ def test_a_face_is_over_a_non_convex_facet_only_clear_of_its_boundary(x, y, insi
     facet = WallFacet(0, 6, (0.0, 0.0, 0.0), tuple(float(c) for c in f.normal[0]), float(f.offset[0]))
     core = place(0, 8, EYE, np.array([x, y, 0.0059]))
 
-    box = _footprint(BOX.core, core, facet, BOX.rounding)
+    pts = np.zeros((8, 3))
+    box, m = _footprint(BOX.core, core, facet, BOX.rounding, pts)
 
-    assert _inside_facet(f.tri.reshape(-1, 3), facet, box) == inside
+    assert _inside_facet(f.tri.reshape(-1, 3), facet, box, pts, m) == inside
+
+
+@pytest.mark.parametrize(("c", "inside"), [(0.132, True), (0.14, False)])
+def test_a_turned_face_beside_an_oblique_edge_is_over_the_facet_while_clear_of_it(c, inside):
+    # A triangular floor, its hypotenuse x + y = 0.3 oblique to the plane's axes; the box turned by
+    # 45 degrees about z, its lower face's nearest edge parallel to the hypotenuse, at distance
+    # (0.3 - 2 c - 0.036 / sqrt(2)) / sqrt(2) (7.5 mm at c = 0.132, over it at 0.14). Its box in
+    # the plane's axes reaches over the hypotenuse in both cases: the face's corners decide.
+    facets = build_facets(
+        [WallMesh(np.array([[0, 0, 0], [0.3, 0, 0], [0, 0.3, 0]], float), np.array([[0, 1, 2]]))]
+    )
+    facet = WallFacet(
+        0, 1, (0.0, 0.0, 0.0), tuple(float(x) for x in facets.normal[0]), float(facets.offset[0])
+    )
+    core = place(0, 8, matrix(from_axis_angle((0, 0, 1), math.pi / 4)), np.array([c, c, 0.0059]))
+    pts = np.zeros((8, 3))
+
+    box, m = _footprint(BOX.core, core, facet, BOX.rounding, pts)
+
+    tri = facets.tri.reshape(-1, 3)
+    assert m == 4 and box[1] - box[2] > 0.3  # u = y, w = -x: the box's corner has x + y > 0.3
+    assert _inside_facet(tri, facet, box, pts, m) == inside
 
 
 def test_a_slightly_tilted_face_is_pressed_where_the_crowned_gap_is_least():
