@@ -95,7 +95,7 @@ def _push(force, torque, b, fx, fy, fz, rx, ry, rz):
     torque[b, 2] += rx * fy - ry * fx
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _twist(torque, b, tx, ty, tz):
     """Adds the torque t (a couple: no force) to body b."""
     torque[b, 0] += tx
@@ -103,7 +103,7 @@ def _twist(torque, b, tx, ty, tz):
     torque[b, 2] += tz
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _approach_rate(bodies, ba, bb, point, n):
     """d(delta)/dt of a contact at ``point`` (3-tuple) with normal n (3-tuple, b -> a) between
     bodies ba and bb: minus their relative velocity there along n."""
@@ -114,7 +114,7 @@ def _approach_rate(bodies, ba, bb, point, n):
     return -((vax - vbx) * n[0] + (vay - vby) * n[1] + (vaz - vbz) * n[2])
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _add_sums(sums, g, delta, rate):
     """Adds one touching contact (overlap ``delta``, ``rate`` = d(delta)/dt) to row g of a
     group's sums (``N_SUMS`` columns)."""
@@ -189,7 +189,7 @@ def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_lim
     return n_pairs + n_walls, bad
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
     """Sphere-sphere contacts. Returns (contacts carrying force, offending body or -1).
 
@@ -399,7 +399,7 @@ def _crown(crown, i):
     return crown[i, 0], crown[i, 1], crown[i, 2]
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _wall_approach_rate(bodies, b, wall_v, point, delta, n):
     """d(delta)/dt of body b's wall contact of overlap ``delta`` and normal n (3-tuple, facet ->
     body) whose facet point is ``point`` (row of ``wall_pairs.point``; the force acts half the
@@ -412,7 +412,7 @@ def _wall_approach_rate(bodies, b, wall_v, point, delta, n):
     return -((vx - wall_v[0]) * n[0] + (vy - wall_v[1]) * n[1] + (vz - wall_v[2]) * n[2])
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
     """Sphere-facet contacts: geometry, then the edge/vertex rule, then per body the overlap sum
     of each facet, then forces with the law of the body's and the wall's materials. Returns

@@ -20,7 +20,7 @@ from dem.conf import JIT_FLAGS
 from dem.quaternion import free_rotor_step, isotropic_rotor_step, to_matrix
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def kick(bodies, h):
     """v += h F/m, L += h T."""
     active, vel, angmom, force, torque, mass = (
@@ -40,7 +40,7 @@ def kick(bodies, h):
             angmom[b, k] += h * torque[b, k]
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def drift(bodies, lb, dt):
     """x += dt v and the free rotor over dt; ``lb`` (3,) is scratch for the body-frame L."""
     active, pos, vel, quat, angmom, inertia, rot = (
@@ -67,7 +67,7 @@ def drift(bodies, lb, dt):
         to_matrix(quat[b], rot[b])
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def update_spheres(spheres, bodies, x_build):
     """World positions of the spheres; returns the largest squared move since ``x_build`` (the
     positions at the last list build)."""
@@ -89,7 +89,7 @@ def update_spheres(spheres, bodies, x_build):
     return worst
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def update_omega(bodies):
     """omega = R I^-1 R^T L for every active body (L / I when the principal moments are equal)."""
     active, rot, angmom, inertia, omega = (

@@ -14,6 +14,14 @@ The state travels in the containers of the modules that build them (``BodyArrays
 gravity, the particles' material) and ``RunState`` (what the driver reads back: time, cost,
 counters, the bodies that left). Nothing here allocates per step and nothing raises for
 physics: ``run_steps`` returns a status, and ``dem/simulation.py`` decides what it means.
+
+The per-step kernels (the stages of ``dem/integrate.py``, the checks here, the sphere and facet
+passes inside ``compute_forces``) are compiled into their caller (``inline="always"``): a compiled
+call that is passed a container costs an atomic reference count up and down for every array in
+it, a few hundred a step, which was a fixed cost of several us a step whatever the number of
+particles (``benchmarks/README.md``, engine speed session 8). ``compute_forces`` itself stays a
+call: ``run_steps`` calls it at two sites, and two inlined copies of the force passes doubled the
+cold compile.
 """
 
 from __future__ import annotations
@@ -167,13 +175,13 @@ def _rebuild(lists, spheres, bodies, walls, settings, cnt):
     return True
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _move_walls(walls, t):
     for w in range(walls.motion.shape[0]):
         evaluate_into(walls.motion[w], t, walls.disp[w], walls.vel[w])
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _count_active_spheres(sbody, active):
     n = 0
     for s in range(sbody.shape[0]):
@@ -182,7 +190,7 @@ def _count_active_spheres(sbody, active):
     return n
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(inline="always", **JIT_FLAGS)
 def _check_bodies(bodies, settings, run):
     """After a step: a NaN or too fast body ends the call with its status; a body whose centre
     left the domain is deactivated and listed. Returns (status, bodies that left)."""
