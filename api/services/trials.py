@@ -21,13 +21,12 @@ import io
 import math
 from collections.abc import Iterator
 
+from pydantic_core import to_json
+
 from api.auth import Principal
 from api.models import TrialRow, decode_value
 from api.schemas import (
     GenerationSummary,
-    ParetoFront,
-    ParetoPoint,
-    RecommendationRead,
     TrialDetail,
     TrialPage,
     TrialRead,
@@ -38,7 +37,7 @@ from api.services.views import Served, StudyViewCache
 from api.store import Page, SqlStore, TrialFilter
 from optimizer.generations import Run, per_generation
 from optimizer.outcomes import individual_failures, is_failed, measured_n
-from optimizer.protocols import StudyStatus, TrialState
+from optimizer.protocols import TrialState
 from optimizer.report import response_column, study_parameter_names, trial_csv_columns
 from optimizer.study import StudyDefinition
 
@@ -60,14 +59,24 @@ def trial_read(row: TrialRow) -> TrialRead:
     )
 
 
-def _pareto_point(row) -> ParetoPoint:
-    f1, f2 = _objectives(row)
-    return ParetoPoint(
-        id=row.id, generation=row.generation, individual=row.individual, replicate=row.replicate,
-        params=row.params, n_remaining=measured_n(row.status, row.n_remaining), responses=row.responses,
-        wall_time_s=row.wall_time_s,
-        cost=row.cost, f1=f1, f2=f2,
-    )
+def _point_item(row) -> dict:
+    """A ``ParetoPoint`` as a dict, from a row of ``trial_columns`` or ``TRIAL_READ_COLUMNS``.
+    Serialised as it is (``_json``), not validated again: what the store holds came through the
+    optimiser's models, and validating the recommendation's 344 matching points of the benchmark's
+    study once more was half of its build's 12 ms of CPU (benchmarks/README.md, session 8)."""
+    return {
+        "id": row.id, "generation": row.generation, "individual": row.individual, "replicate": row.replicate,
+        "params": row.params, "n_remaining": measured_n(row.status, row.n_remaining),
+        "responses": row.responses, "wall_time_s": row.wall_time_s, "cost": row.cost,
+        "f1": _finite_objective(row.f1_value, row.f1_kind),
+        "f2": _finite_objective(row.f2_value, row.f2_kind),
+    }
+
+
+def _json(document: dict) -> bytes:
+    """A document of plain values as its response model serialises it (an infinite or NaN number
+    as null, as pydantic's ``ser_json_inf_nan`` default does)."""
+    return to_json(document, inf_nan_mode="null")
 
 
 def _trial_item(row) -> dict:
@@ -139,14 +148,12 @@ def pareto_front_json(
     def build() -> bytes:
         rows = [row for row in store.pareto_columns(study_id) if not is_failed(row.status)]
         points = sorted(
-            (point for point in map(_pareto_point, rows) if point.f1 is not None),
-            key=lambda p: (_sort_key(p.f1), _sort_key(p.f2)),
+            (point for point in map(_point_item, rows) if point["f1"] is not None),
+            key=lambda p: (_sort_key(p["f1"]), _sort_key(p["f2"])),
         )
         generations = store.load_study(study_id).definition.get("ga", {}).get("generations")
-        front = ParetoFront(
-            study_id=study_id, generation=latest_generation(study.generation, generations), points=points
-        )
-        return front.model_dump_json().encode()
+        latest = latest_generation(study.generation, generations)
+        return _json({"study_id": study_id, "generation": latest, "points": points})
 
     return views.serve("pareto", study_id, study.change_number, build, held=held)
 
@@ -169,36 +176,33 @@ def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> 
 def recommendation_json(
     store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, held: str | None = None
 ) -> Served:
-    """``recommendation`` as JSON, built once per version of the study row: every input (status,
+    """``RecommendationRead`` as JSON, built once per version of the study row: every input (status,
     the stored recommendation, the objectives f1/f2 that ``save_generation`` writes) changes the
     row, while dashboards read it after each such change (``held``: the client's
     ``If-None-Match``)."""
     study = store.study_version(study_id, principal.visible_to)
-
-    def build() -> bytes:
-        return recommendation(store, study_id, principal).model_dump_json().encode()
-
-    return views.serve("recommendation", study_id, study.change_number, build, held=held)
+    return views.serve("recommendation", study_id, study.change_number,
+                       lambda: _json(_recommendation(store, study_id)), held=held)
 
 
-def recommendation(store: SqlStore, study_id: str, principal: Principal) -> RecommendationRead:
-    study = store.get_study(study_id, principal.visible_to)
+def _recommendation(store: SqlStore, study_id: str) -> dict:
+    study = store.get_study(study_id)
     try:
         tolerance = StudyDefinition.model_validate(study.definition).match_tolerance()
     except ValueError:
         tolerance = 0.0
-    matching: dict[int, ParetoPoint] = {}
+    matching: dict[int, dict] = {}
     # Only the matching trials are read: most of a long study's trials do not match, and reading
     # all 10,000 of the benchmark's study was 130 of the build's 150 ms (benchmarks/README.md).
     for row in store.trial_columns(study_id, f1_at_most=tolerance):
         # One entry per parameter set: replicates of an individual share their objectives.
         if row.individual not in matching:
-            matching[row.individual] = _pareto_point(row)
-    equivalent = sorted(matching.values(), key=lambda p: (_sort_key(p.f2), _sort_key(p.f1)))
-    return RecommendationRead(
-        study_id=study_id, status=StudyStatus(study.status), recommendation=study.recommendation,
-        equivalent=equivalent,
-    )
+            matching[row.individual] = _point_item(row)
+    equivalent = sorted(matching.values(), key=lambda p: (_sort_key(p["f2"]), _sort_key(p["f1"])))
+    return {
+        "study_id": study_id, "status": study.status, "recommendation": study.recommendation,
+        "equivalent": equivalent,
+    }
 
 
 def export_rows(store: SqlStore, study_id: str, principal: Principal) -> tuple[list[str], list[dict]]:

@@ -379,3 +379,38 @@ def test_a_client_holding_the_current_version_gets_a_304_from_any_server_without
     assert len(statements) == len(urls)  # the version lookup, and nothing else
     assert after[urls[0]].status_code == 200 and after[urls[0]].json()["status"] == "done"
     assert after[urls[0]].headers["ETag"] != tags[urls[0]]
+
+
+class _Refused:
+    """A pydantic validator that fails: what it replaces must not be called."""
+
+    def validate_python(self, *args, **kwargs):
+        raise AssertionError("validated again")
+
+
+def test_the_recommendation_is_serialised_from_its_column_rows_without_validating_each_point(
+    client, keys, store, monkeypatch
+):
+    # Validating each matching point again was a recommendation build's cost (benchmarks/README.md,
+    # API session 8, part 2): its JSON is still what RecommendationRead reads.
+    from api.schemas import ParetoPoint, RecommendationRead
+
+    study_id = _run(store, executor=SyntheticExecutor(_half_matching))
+    tolerance = StudyDefinition.model_validate(store.load_study(study_id).definition).match_tolerance()
+    trials = f"/api/v1/studies/{study_id}/trials"
+    items = client.get(trials, params={"limit": 500}, headers=keys.auth()).json()
+    first_of_each: dict[int, dict] = {}
+    for item in items["items"]:  # ordered by generation, individual, replicate
+        if item["status"] == "ok" and item["f1"] is not None and item["f1"] <= tolerance:
+            first_of_each.setdefault(item["individual"], {key: item[key] for key in ParetoPoint.model_fields})
+    expected = sorted(first_of_each.values(), key=lambda point: (point["f2"], point["f1"]))
+    for model in (ParetoPoint, RecommendationRead):
+        monkeypatch.setattr(model, "__pydantic_validator__", _Refused())
+
+    body = client.get(f"/api/v1/studies/{study_id}/recommendation", headers=keys.auth()).content
+    monkeypatch.undo()
+
+    read = RecommendationRead.model_validate_json(body)
+    assert read.model_dump(mode="json")["equivalent"] == expected and expected
+    assert read.recommendation == store.load_study(study_id).recommendation
+    assert read.status == StudyStatus.DONE
