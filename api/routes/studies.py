@@ -37,8 +37,9 @@ def cached_json(served: Served) -> Response:
     served while the current one builds (progress, identifiability): the dashboard asks for a
     view again only when the study changed or its last answer was stale. It is on every answer,
     304s too, because a cache keeps a stored header the 304 does not replace. A stale view whose
-    next build rests (identifiability) also says in ``Retry-After`` how many seconds pass at least
-    before a newer version can be ready: the dashboard does not ask for it again before."""
+    builds rest (identifiability), resting or building, also says in ``Retry-After`` how many
+    seconds pass at least before a newer version can be ready: the dashboard does not ask for it
+    again before."""
     headers = {
         "ETag": served.etag, "Cache-Control": "no-cache",
         "X-Demcal-View": "current" if served.current else "stale",

@@ -26,9 +26,11 @@ never takes more than 1 / (1 + rest) of a core however fast the versions come. I
 trials it took two thirds of a core of a 2-core machine that also served 50 dashboards
 (``benchmarks/README.md``, session 5). ``serve`` says whether what it answers is the current
 version or a stale one, so that a client knows to ask again (``X-Demcal-View``), and, for a view
-that rests, when a newer version can be ready at the earliest (the rest left plus one build's
-duration: ``Retry-After``): a page asking every poll for a view that rests was a third of the
-requests of 50 polling dashboards (session 6).
+that rests, when a newer version can be ready at the earliest (``Retry-After``: the rest left plus
+one build's duration; while it builds, what is left of a build as long as its previous one): a page
+asking every poll for a view that rests was a third of the requests of 50 polling dashboards
+(session 6), and asking every poll while identifiability built was 84-915 requests a benchmark run
+(session 8).
 
 A view's ETag is its version, a number the database hands out (the study's change numbers,
 ``api/models.py``), and a digest of its bytes (``etag``). A client that holds the current version
@@ -62,7 +64,7 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class Served:
     """A view's bytes, and whether they are of the version asked for (False: an older one, served
-    while the asked version builds or its build rests); for a stale one whose build rests, the
+    while the asked version builds or its build rests); for a stale one of a view that rests, the
     seconds before a newer version can be ready. ``not_modified``: the client holds these bytes
     (``held``), the answer is a 304 with no body."""
 
@@ -114,7 +116,8 @@ class StudyViewCache:
         self._refreshing: set[tuple[str, str]] = set()  # (view, study id) built in the background
         self._kept: OrderedDict[tuple[str, str], object] = OrderedDict()
         self._resting: dict[tuple[str, str], float] = {}  # (view, study id) -> monotonic time it may build
-        self._took: dict[tuple[str, str], float] = {}  # (view, study id) -> its last resting build's seconds
+        self._took: dict[tuple[str, str], float] = {}  # (view, study id) -> its last build's seconds
+        self._started: dict[tuple[str, str], float] = {}  # (view, study id) -> monotonic start of its refresh
         self._lock = threading.Lock()
 
     def get_or_build(
@@ -148,7 +151,8 @@ class StudyViewCache:
                 refresh = key not in self._refreshing and resting_s <= 0
                 if refresh:
                     self._refreshing.add(key)
-                retry_after_s = resting_s + self._took[key] if resting_s > 0 else None
+                    self._started[key] = now
+                retry_after_s = self._retry_after(key, now, resting_s) if rest > 0 else None
             else:
                 pending = self._building.get((*key, version))
                 mine = pending is None
@@ -172,6 +176,17 @@ class StudyViewCache:
         same = held is not None and "." + digest + '"' in held
         return Served(b"" if same else body, current, retry_after_s, etag(version, digest), same)
 
+    def _retry_after(self, key: tuple[str, str], now: float, resting_s: float) -> float | None:
+        """Seconds before a newer version of a resting view can be ready: the rest left and one
+        build; while one builds, what is left of it if it takes as long as the previous one
+        (called under the lock)."""
+        took = self._took.get(key)
+        if took is None:
+            return None
+        if resting_s > 0:
+            return resting_s + took
+        return max(0.0, took - (now - self._started[key]))
+
     def kept(self, view: str, study_id: str, make: Callable[[], T]) -> T:
         """The object ``view`` keeps for ``study_id`` between builds (made on first use); past
         ``max_kept`` the least recently used is forgotten (its next build starts afresh). Builds
@@ -190,6 +205,7 @@ class StudyViewCache:
         self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes], done: Future
     ) -> None:
         """Build outside the lock; store it; hand it (or the error) to every request waiting for it."""
+        started = time.monotonic()
         try:
             body = build()
         except BaseException as exc:
@@ -198,8 +214,10 @@ class StudyViewCache:
                 self._building.pop((*key, version), None)
             return
         entry = (version, body, _digest(body))
+        took = time.monotonic() - started
         with self._lock:
             self._store(key, entry)
+            self._took[key] = took
             self._building.pop((*key, version), None)
         done.set_result(entry)
 
@@ -221,8 +239,9 @@ class StudyViewCache:
                 self._store(key, entry)
             if rest > 0:
                 self._resting[key] = ended + rest * (ended - started)
-                self._took[key] = ended - started
+            self._took[key] = ended - started
             self._refreshing.discard(key)
+            self._started.pop(key, None)
 
     def _store(self, key: tuple[str, str], entry: tuple[Hashable, bytes, str]) -> None:
         self._entries[key] = entry

@@ -110,3 +110,33 @@ def test_identifiability_resting_between_builds_says_when_to_ask_again(client, k
     assert int(stale.headers["Retry-After"]) >= 1
     assert revalidated.status_code == 304
     assert 1 <= int(revalidated.headers["Retry-After"]) <= int(stale.headers["Retry-After"])  # counting down
+
+
+def test_identifiability_while_it_builds_says_when_to_ask_again(client, keys, store, monkeypatch):
+    # A stale answer while the next version builds carried no Retry-After: pages asked again every
+    # poll, 84-915 times a benchmark run (benchmarks/README.md, API session 8, part 2).
+    from api.services import progress
+
+    def slow(build, store, study_id) -> bytes:
+        time.sleep(1.5)  # a long study's build
+        return build(store, study_id)
+
+    monkeypatch.setattr(progress, "in_child", slow)
+    definition = StudyDefinition.model_validate(
+        study_definition(ga={"population": 8, "offspring": 4, "generations": 3}, seed=7)
+    )
+    study_id = store.create_study(definition.model_dump(mode="json"), owner="alice")
+    Driver(store, SyntheticExecutor(synthetic_with_failures)).run_to_completion(study_id, poll_timeout=0)
+    url = f"/api/v1/studies/{study_id}/identifiability"
+    client.get(url, headers=keys.auth())  # built on the request: its build took 1.5 s
+    generation = store.load_study(study_id).generation
+    store.save_generation(study_id, generation + 1, b"state", [], None, objectives={})
+
+    building = client.get(url, headers=keys.auth())
+
+    assert building.headers["X-Demcal-View"] == "stale"
+    assert int(building.headers["Retry-After"]) >= 2  # the 1.5 s a build took, rounded up
+    deadline = time.monotonic() + 30
+    while client.get(url, headers=keys.auth()).headers["X-Demcal-View"] != "current":  # ends in the test
+        assert time.monotonic() < deadline, "the next version was never built"
+        time.sleep(0.1)
