@@ -101,7 +101,7 @@ def create_app(settings: Settings, engine: sa.Engine | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.store = SqlStore(engine)
     app.state.key_cache = KeyCache(settings.api_key_cache_s)
-    app.state.study_views = StudyViewCache()
+    app.state.study_views = StudyViewCache(max_kept_studies=settings.view_kept_studies)
     install_error_handlers(app)
     strict_query = [Depends(reject_unknown_query), Depends(reject_impossible_ids)]
     for module in (studies, trials, simulations, shapes, metrics):

@@ -63,6 +63,12 @@ class Settings(BaseSettings):
     max_mesh_faces: int = Field(2_000_000, ge=4, description="Most faces an uploaded mesh may have.")
     max_population: int = Field(500, ge=2, description="Largest GA population a study may ask for.")
     max_simulations: int = Field(5000, ge=1, description="Largest simulation budget of one study.")
+    view_kept_studies: int = Field(
+        64, ge=1,
+        description="Studies whose progress and trial counts a server process keeps between polls "
+        "(progress keeps each trial's record, about 4 kB a trial); a study polled after more others "
+        "than this is read whole again.",
+    )
     api_key_cache_s: float = Field(
         1.0, ge=0, le=60,
         description="Seconds a verified API key is remembered; a revoked key works at most this long.",

@@ -17,7 +17,11 @@ come faster than a build ends would otherwise each start one, and the builds wou
 they took every core (the next poll after a build ends starts the one for the latest version).
 
 A view may also keep an object between its builds (``kept``): progress folds only the batches
-completed since its previous build, the study read counts only the trials written since.
+completed since its previous build, the study read counts only the trials written since. They are
+kept per study, for the ``max_kept_studies`` studies polled last (``DEMCAL_VIEW_KEPT_STUDIES``):
+a study past it is read whole again at its next build (2 s of CPU for progress of a study of
+10,000 trials, against 1.3 ms kept), and with one limit of 32 (view, study) pairs, 16 studies
+polled in turn missed at every build (benchmarks/README.md, API session 8, part 2).
 
 A background build may also be made to rest (``rest``): after a build that took t seconds, the
 next one of that view and study starts no sooner than ``rest * t`` after it ended, so the view
@@ -107,14 +111,14 @@ def _held_at(held: str, version: Hashable) -> str | None:
 class StudyViewCache:
     """Serialised views by (view, study id), each valid for one version; least recently used out."""
 
-    def __init__(self, max_entries: int = 512, max_kept: int = 32) -> None:
+    def __init__(self, max_entries: int = 512, max_kept_studies: int = 64) -> None:
         self.max_entries = max_entries
-        self.max_kept = max_kept  # kept objects may be large (progress keeps a study's records)
+        self.max_kept_studies = max_kept_studies  # progress keeps a study's records: large
         # (view, study id) -> (version, bytes, their digest)
         self._entries: OrderedDict[tuple[str, str], tuple[Hashable, bytes, str]] = OrderedDict()
         self._building: dict[tuple[str, str, Hashable], Future] = {}
         self._refreshing: set[tuple[str, str]] = set()  # (view, study id) built in the background
-        self._kept: OrderedDict[tuple[str, str], object] = OrderedDict()
+        self._kept: OrderedDict[str, dict[str, object]] = OrderedDict()  # study id -> view -> object
         self._resting: dict[tuple[str, str], float] = {}  # (view, study id) -> monotonic time it may build
         self._took: dict[tuple[str, str], float] = {}  # (view, study id) -> its last build's seconds
         self._started: dict[tuple[str, str], float] = {}  # (view, study id) -> monotonic start of its refresh
@@ -189,17 +193,19 @@ class StudyViewCache:
 
     def kept(self, view: str, study_id: str, make: Callable[[], T]) -> T:
         """The object ``view`` keeps for ``study_id`` between builds (made on first use); past
-        ``max_kept`` the least recently used is forgotten (its next build starts afresh). Builds
-        of one view and study may overlap (two versions asked for before either is cached): the
-        object must lock itself."""
-        key = (view, study_id)
+        ``max_kept_studies`` the least recently used study's objects are forgotten (its next
+        builds start afresh). Builds of one view and study may overlap (two versions asked for
+        before either is cached): the object must lock itself."""
         with self._lock:
-            if key not in self._kept:
-                self._kept[key] = make()
-                while len(self._kept) > self.max_kept:
+            objects = self._kept.get(study_id)
+            if objects is None:
+                objects = self._kept[study_id] = {}
+                while len(self._kept) > self.max_kept_studies:
                     self._kept.popitem(last=False)
-            self._kept.move_to_end(key)
-            return self._kept[key]
+            self._kept.move_to_end(study_id)
+            if view not in objects:
+                objects[view] = make()
+            return objects[view]
 
     def _build(
         self, key: tuple[str, str], version: Hashable, build: Callable[[], bytes], done: Future

@@ -179,3 +179,30 @@ def test_a_stale_answer_of_a_resting_view_while_it_builds_says_when_the_build_sh
     assert building.retry_after_s == pytest.approx(0.5, abs=0.05)
     assert (asked_again.body, asked_again.current) == (b"v1", False)
     assert asked_again.retry_after_s == pytest.approx(0.5 - waited, abs=0.05)
+
+
+def test_forty_polled_studies_keep_their_objects_between_builds():
+    # One limit of 32 (view, study) pairs: with progress and the study read each keeping one, 16
+    # studies polled in turn made theirs afresh at every build, and a fresh progress reads the
+    # whole study (benchmarks/README.md, API session 8, part 2).
+    views, made = StudyViewCache(), []
+
+    for _ in range(2):
+        for study in range(40):
+            for view in ("progress", "trial-tally"):
+                views.kept(view, f"s{study}", lambda: made.append(1) or object())
+
+    assert len(made) == 80  # once per view and study
+
+
+def test_past_its_limit_the_least_recently_polled_study_loses_its_kept_objects(settings, engine):
+    from api.app import create_app
+
+    views = create_app(settings.model_copy(update={"view_kept_studies": 2}), engine=engine).state.study_views
+    kept = {(view, study): views.kept(view, study, object) for study in ("s1", "s2") for view in ("a", "b")}
+
+    views.kept("a", "s1", object)  # s1 polled last: s2 is the least recent
+    views.kept("a", "s3", object)
+
+    assert views.kept("b", "s1", object) is kept[("b", "s1")]
+    assert views.kept("a", "s2", object) is not kept[("a", "s2")]
