@@ -142,6 +142,8 @@ class TrialRow(Base):
         sa.Index("ix_trials_study_updated", "study_id", "updated_at"),
         sa.Index("ix_trials_study_change", "study_id", "change_number"),
         sa.Index("ix_trials_study_pareto", "study_id", "pareto"),
+        # The recommendation's matching trials (f1 within tolerance), not a scan of the study's.
+        sa.Index("ix_trials_study_f1", "study_id", "f1_value"),
         sa.UniqueConstraint("study_id", "individual", "replicate"),
     )
 

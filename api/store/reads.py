@@ -105,7 +105,7 @@ class DashboardReads(StoreBase):
         """Every trial's plot and summary columns, without the JSON blobs (for summaries); with
         ``f1_at_most``, only the ok trials whose finite f1 is at most that (the matching ones:
         most of a long study's trials are not, and reading them all was most of a
-        recommendation's cost)."""
+        recommendation's cost), read off the index on (study, f1) (migration 0008)."""
         query = (
             sa.select(
                 TrialRow.id, TrialRow.generation, TrialRow.individual, TrialRow.replicate,
