@@ -74,8 +74,8 @@ def _point_item(row) -> dict:
 
 
 def _json(document: dict) -> bytes:
-    """A document of plain values as its response model serialises it (an infinite or NaN number
-    as null, as pydantic's ``ser_json_inf_nan`` default does)."""
+    """A document of plain values as JSON, an infinite or NaN number as null (as the response
+    models' ``ser_json_inf_nan`` default writes it)."""
     return to_json(document, inf_nan_mode="null")
 
 
