@@ -28,7 +28,7 @@ from dem.conf import JIT_FLAGS  # noqa: E402
 from dem.convex import gjk_distance, place  # noqa: E402
 from dem.crown import crowned_contact  # noqa: E402
 from dem.forces import _crown, _sphere_pair_forces, _wall_forces, compute_forces  # noqa: E402
-from dem.integrate import drift, kick, update_omega, update_spheres  # noqa: E402
+from dem.integrate import drift, kick, live_rows, update_omega, update_spheres  # noqa: E402
 from dem.neighbours import N_PAIRS, rebuild_lists  # noqa: E402
 from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry  # noqa: E402
 
@@ -176,6 +176,7 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
             getattr(bodies, k)[...] = v
 
     lb = np.zeros(3)
+    live, live_spheres = live_rows(bodies.active, spheres.body)
     rows = [
         ("compute_forces", lambda: compute_forces(bodies, spheres, mat, walls, lists, grav, lim, 0.0)),
         ("  sphere/piece pairs", lambda: _sphere_pair_forces(bodies, spheres, lists.pairs, lim, 0.0)),
@@ -201,11 +202,11 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
             ),
         ]
     rows += [
-        ("kick", lambda: kick(bodies, 0.5 * dt)),
-        ("drift (restored after)", lambda: (drift(bodies, lb, dt), restore())),
+        ("kick", lambda: kick(bodies, live, 0.5 * dt)),
+        ("drift (restored after)", lambda: (drift(bodies, live, lb, dt), restore())),
         (
             "update_spheres + omega",
-            lambda: (update_spheres(spheres, bodies, lists.grid.x_build), update_omega(bodies)),
+            lambda: (update_spheres(spheres, bodies, live_spheres, lists.grid.x_build), update_omega(bodies, live)),
         ),
         (
             "list rebuild (per build)",

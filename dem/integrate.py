@@ -10,30 +10,38 @@ turns exactly about L, ``isotropic_rotor_step``)::
 and the kinematics that follow a drift: the spheres' world centres from the body poses, and
 omega = R I^-1 R^T L. The order of the stages is the run loop's (``dem/loop.py``). Kernels only,
 over the active bodies; they must not know about contacts or walls.
+
+The kernels visit the rows listed in ``live`` (active bodies) or ``live_spheres`` (their
+spheres), ascending, from ``live_rows``: as bodies are removed (an emptying tray), a loop over
+every row with a test per row kept a cost per step of the bodies that had gone.
 """
 
 from __future__ import annotations
 
 import numba
+import numpy as np
 
 from dem.conf import JIT_FLAGS
 from dem.quaternion import free_rotor_step, isotropic_rotor_step, to_matrix
 
 
+@numba.njit(**JIT_FLAGS)
+def live_rows(active, sbody):
+    """(rows of the active bodies, rows of their spheres), ascending."""
+    return np.nonzero(active)[0], np.nonzero(active[sbody])[0]
+
+
 @numba.njit(inline="always", **JIT_FLAGS)
-def kick(bodies, h):
+def kick(bodies, live, h):
     """v += h F/m, L += h T."""
-    active, vel, angmom, force, torque, mass = (
-        bodies.active,
+    vel, angmom, force, torque, mass = (
         bodies.vel,
         bodies.angmom,
         bodies.force,
         bodies.torque,
         bodies.mass,
     )
-    for b in range(active.shape[0]):
-        if not active[b]:
-            continue
+    for b in live:
         hm = h / mass[b]
         for k in range(3):
             vel[b, k] += hm * force[b, k]
@@ -41,10 +49,9 @@ def kick(bodies, h):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def drift(bodies, lb, dt):
+def drift(bodies, live, lb, dt):
     """x += dt v and the free rotor over dt; ``lb`` (3,) is scratch for the body-frame L."""
-    active, pos, vel, quat, angmom, inertia, rot = (
-        bodies.active,
+    pos, vel, quat, angmom, inertia, rot = (
         bodies.pos,
         bodies.vel,
         bodies.quat,
@@ -52,9 +59,7 @@ def drift(bodies, lb, dt):
         bodies.inertia,
         bodies.rot,
     )
-    for b in range(active.shape[0]):
-        if not active[b]:
-            continue
+    for b in live:
         for k in range(3):
             pos[b, k] += dt * vel[b, k]
         if inertia[b, 0] == inertia[b, 1] and inertia[b, 1] == inertia[b, 2]:
@@ -68,16 +73,14 @@ def drift(bodies, lb, dt):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def update_spheres(spheres, bodies, x_build):
+def update_spheres(spheres, bodies, live_spheres, x_build):
     """World positions of the spheres; returns the largest squared move since ``x_build`` (the
     positions at the last list build)."""
     x, offset, sbody = spheres.x, spheres.offset, spheres.body
-    active, pos, rot = bodies.active, bodies.pos, bodies.rot
+    pos, rot = bodies.pos, bodies.rot
     worst = 0.0
-    for s in range(x.shape[0]):
+    for s in live_spheres:
         b = sbody[s]
-        if not active[b]:
-            continue
         ox, oy, oz = offset[s, 0], offset[s, 1], offset[s, 2]
         r = rot[b]
         x[s, 0] = pos[b, 0] + r[0, 0] * ox + r[0, 1] * oy + r[0, 2] * oz
@@ -90,18 +93,15 @@ def update_spheres(spheres, bodies, x_build):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def update_omega(bodies):
+def update_omega(bodies, live):
     """omega = R I^-1 R^T L for every active body (L / I when the principal moments are equal)."""
-    active, rot, angmom, inertia, omega = (
-        bodies.active,
+    rot, angmom, inertia, omega = (
         bodies.rot,
         bodies.angmom,
         bodies.inertia,
         bodies.omega,
     )
-    for b in range(active.shape[0]):
-        if not active[b]:
-            continue
+    for b in live:
         if inertia[b, 0] == inertia[b, 1] and inertia[b, 1] == inertia[b, 2]:
             for k in range(3):
                 omega[b, k] = angmom[b, k] / inertia[b, 0]

@@ -34,7 +34,7 @@ import numpy as np
 
 from dem.conf import JIT_FLAGS
 from dem.forces import body_pair_laws, compute_forces
-from dem.integrate import drift, kick, update_omega, update_spheres
+from dem.integrate import drift, kick, live_rows, update_omega, update_spheres
 from dem.materials import MaterialArrays
 from dem.motion import evaluate_into
 from dem.neighbours import rebuild_lists
@@ -109,12 +109,12 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
     skin = settings.skin
     lb = np.zeros(3)
     cnt[C_STEPS] = 0
-    n_active_spheres = _count_active_spheres(spheres.body, bodies.active)
+    live, live_spheres = live_rows(bodies.active, spheres.body)
     force_rebuild = need_forces or resume
     if need_forces and not resume:
         _move_walls(walls, clk[K_T])
-        update_spheres(spheres, bodies, lists.grid.x_build)
-        update_omega(bodies)
+        update_spheres(spheres, bodies, live_spheres, lists.grid.x_build)
+        update_omega(bodies, live)
         if not _rebuild(lists, spheres, bodies, walls, settings, cnt):
             cnt[C_MIDSTEP] = 0
             return STATUS_CAPACITY
@@ -129,12 +129,12 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
     step = 0
     while step < n_steps:
         if not resume:
-            kick(bodies, half)
-            drift(bodies, lb, dt)
+            kick(bodies, live, half)
+            drift(bodies, live, lb, dt)
             clk[K_T] += dt
             _move_walls(walls, clk[K_T])
-            sphere_move2 = update_spheres(spheres, bodies, lists.grid.x_build)
-            update_omega(bodies)
+            sphere_move2 = update_spheres(spheres, bodies, live_spheres, lists.grid.x_build)
+            update_omega(bodies, live)
             sphere_move = math.sqrt(sphere_move2)
             if 2.0 * sphere_move > skin:
                 force_rebuild = True
@@ -150,18 +150,18 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
         if bad >= 0:
             cnt[C_BAD_BODY] = bad
             return STATUS_UNSTABLE_OVERLAP
-        kick(bodies, half)
+        kick(bodies, live, half)
         step += 1
         cnt[C_STEPS] = step
-        clk[K_COST] += n_active_spheres + n_contacts
+        clk[K_COST] += live_spheres.shape[0] + n_contacts
         cnt[C_CONTACTS] = n_contacts
-        status, n_left = _check_bodies(bodies, settings, run)
+        status, n_left = _check_bodies(bodies, live, settings, run)
         if status != STATUS_OK:
             return status
         if n_left > 0:
-            n_active_spheres = _count_active_spheres(spheres.body, bodies.active)
+            live, live_spheres = live_rows(bodies.active, spheres.body)
             force_rebuild = True
-    update_omega(bodies)
+    update_omega(bodies, live)
     return STATUS_OK
 
 
@@ -182,16 +182,7 @@ def _move_walls(walls, t):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _count_active_spheres(sbody, active):
-    n = 0
-    for s in range(sbody.shape[0]):
-        if active[sbody[s]]:
-            n += 1
-    return n
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def _check_bodies(bodies, settings, run):
+def _check_bodies(bodies, live, settings, run):
     """After a step: a NaN or too fast body ends the call with its status; a body whose centre
     left the domain is deactivated and listed. Returns (status, bodies that left)."""
     active, pos, vel, angmom = bodies.active, bodies.pos, bodies.vel, bodies.angmom
@@ -199,9 +190,7 @@ def _check_bodies(bodies, settings, run):
     vmax2 = settings.max_speed**2
     cnt = run.counters
     n_left = 0
-    for b in range(active.shape[0]):
-        if not active[b]:
-            continue
+    for b in live:
         v2 = vel[b, 0] ** 2 + vel[b, 1] ** 2 + vel[b, 2] ** 2
         l2 = angmom[b, 0] ** 2 + angmom[b, 1] ** 2 + angmom[b, 2] ** 2
         if not (math.isfinite(v2) and math.isfinite(l2) and math.isfinite(pos[b, 0] + pos[b, 1] + pos[b, 2])):
