@@ -206,7 +206,10 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
         ("drift (restored after)", lambda: (drift(bodies, live, lb, dt), restore())),
         (
             "update_spheres + omega",
-            lambda: (update_spheres(spheres, bodies, live_spheres, lists.grid.x_build), update_omega(bodies, live)),
+            lambda: (
+                update_spheres(spheres, bodies, live_spheres, lists.grid.x_build),
+                update_omega(bodies, live),
+            ),
         ),
         (
             "list rebuild (per build)",
