@@ -5,7 +5,10 @@ for every seed, parameter set and clump resolution, interleaved (seed outermost)
 short still has a sample in every cell, and prints one line per run plus a summary table:
 
     NUMBA_NUM_THREADS=1 nice -n 10 python benchmarks/convergence.py \
-        [--seeds 10] [--resolutions 12 24 48] [--sets empties clogs]
+        [--seeds 10] [--resolutions 12 24 48] [--sets empties clogs] [--polyhedra]
+
+``--polyhedra`` adds a column of rounded-polyhedral items (resolution "poly"); ``--resolutions``
+with no value leaves the clumps out.
 
 Parameter sets: ``empties`` (E 1e7, e 0.5, mu 0.5: the tray empties at 12 spheres) and ``clogs``
 (E 1e7, e 0.2, mu 0.9: items stay behind at 12 spheres).
@@ -30,22 +33,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="examples/feeder.toml")
     parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--resolutions", type=int, nargs="+", default=[12, 24, 48])
+    parser.add_argument("--resolutions", type=int, nargs="*", default=[12, 24, 48])
     parser.add_argument("--sets", nargs="+", default=list(SETS), choices=list(SETS))
+    parser.add_argument("--polyhedra", action="store_true", help="a rounded-polyhedron column too")
     args = parser.parse_args()
     base = load_feeder_config(args.config)
-    results: dict[tuple[str, int], list[int]] = {}
+    shapes = [(str(r), {"representation": "clump", "resolution": r}) for r in args.resolutions]
+    if args.polyhedra:
+        shapes.append(("poly", {"representation": "polyhedron"}))
+    results: dict[tuple[str, str], list[int]] = {}
     for seed in range(args.seeds):
         for name in args.sets:
-            for resolution in args.resolutions:
-                config = base.model_copy(
-                    update={"items": base.items.model_copy(update={"resolution": resolution})}
-                )
+            for resolution, items in shapes:
+                config = base.model_copy(update={"items": base.items.model_copy(update=items)})
                 started = time.perf_counter()
                 r = run_feeder(config, SETS[name], seed)
                 results.setdefault((name, resolution), []).append(r.n_remaining)
                 print(
-                    f"{name} res {resolution:3d} seed {seed}: N_t = {r.n_remaining}/{r.n_items}, "
+                    f"{name} res {resolution:>4} seed {seed}: N_t = {r.n_remaining}/{r.n_items}, "
                     f"{r.status.value}, t_end {r.sim_time:.1f} s, "
                     f"{time.perf_counter() - started:.0f} s wall",
                     flush=True,
