@@ -295,7 +295,10 @@ def test_a_second_sigterm_stops_the_worker_at_once_and_the_trial_runs_elsewhere(
     # a pushed result within a second): had w1 finished the trial, its result would be the one
     # recorded (the store refuses a second), so the trial ran again and only w2's run counts.
     assert trial["worker"] == "w2"
-    assert trial["attempts"] == 2
+    # At least w1's interrupted run and w2's. One more when serve's reconciliation also found the
+    # trial lost in the moment between w1's exit and RQ's retry, and sent it again itself (seen
+    # once at load, 3 == 2): each sending is an attempt, whichever process made it.
+    assert trial["attempts"] >= 2
 
 
 def test_two_serve_replicas_at_once_share_the_studies(cluster):
