@@ -106,7 +106,7 @@ def register(app: typer.Typer) -> None:
         try:
             document = _store().archive_study(study_id)
         except NotFoundError as exc:
-            _fail(exc.detail.split(";")[0] + "; list them with `demcal studies list`")
+            _unknown_study(exc)
         path = output or Path(f"{study_id}.json")
         path.write_text(json.dumps(document, separators=(",", ":")))
         typer.echo(f"{study_id}: {len(document['trials'])} trials written to {path}")
@@ -135,6 +135,11 @@ def register(app: typer.Typer) -> None:
         )
 
 
+def _unknown_study(exc) -> None:
+    """Exit 2 on a study id this database does not hold, saying how to see the ones it does."""
+    _fail(exc.detail.split(";")[0] + "; list them with `demcal studies list`")
+
+
 def _read(study_id: str):
     from api.errors import NotFoundError
     from api.services import studies
@@ -142,7 +147,7 @@ def _read(study_id: str):
     try:
         return studies.get_study(_store(), study_id, _operator())
     except NotFoundError as exc:
-        _fail(exc.detail.split(";")[0] + "; list them with `demcal studies list`")
+        _unknown_study(exc)
 
 
 def _register_action(studies_app: typer.Typer, action: str) -> None:
@@ -154,7 +159,7 @@ def _register_action(studies_app: typer.Typer, action: str) -> None:
         try:
             study = studies.change_status(_store(), study_id, action, _operator())
         except NotFoundError as exc:
-            _fail(exc.detail.split(";")[0] + "; list them with `demcal studies list`")
+            _unknown_study(exc)
         except ConflictError as exc:
             _fail(exc.detail)
         typer.echo(f"{study.id}: {study.status.value}")
