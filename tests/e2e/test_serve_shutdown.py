@@ -48,11 +48,22 @@ def test_sigterm_to_serve_stops_its_busy_local_workers(tmp_path):
         study = tiny_study("shutdown", population=4, generations=0)
         study["scenario"]["stages"]["vibration_time"] = 600.0  # busy for far longer than the test
         auth = {"Authorization": f"Bearer {token}"}
-        created = httpx.post(f"{base}/api/v1/studies", json=study, headers=auth, timeout=60)
+        # Generous: what this test checks is the shutdown; the creation builds the items' clumps
+        # for the validity estimate, which once took over 60 s at a loaded CI's start.
+        try:
+            created = httpx.post(f"{base}/api/v1/studies", json=study, headers=auth, timeout=180)
+        except httpx.TimeoutException:
+            log.flush()
+            pytest.fail("creating the study timed out; serve's log:\n" + _tail(tmp_path / "serve.log"))
         assert created.status_code == 201, created.text
         busy = lambda: len(descendants(serve.pid)) >= 2 and descendants(serve.pid)  # noqa: E731
         workers = wait_for(busy, 120, "the local workers")
-        time.sleep(3.0)  # the trials are being computed
+        study_url = f"{base}/api/v1/studies/{created.json()['id']}"
+        running = lambda: httpx.get(study_url, headers=auth, timeout=30).json()["progress"][  # noqa: E731
+            "trials_by_state"
+        ].get("running", 0) >= 2
+        wait_for(running, 300, "both workers to compute a trial (after their warm-up)")
+        time.sleep(2.0)
 
         serve.send_signal(signal.SIGTERM)
         assert serve.wait(60) == 0
@@ -66,6 +77,10 @@ def test_sigterm_to_serve_stops_its_busy_local_workers(tmp_path):
             if alive(pid):
                 os.kill(pid, signal.SIGKILL)
         log.close()
+
+
+def _tail(path: Path, lines: int = 40) -> str:
+    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
 
 
 def _up(base: str) -> bool:
