@@ -41,27 +41,32 @@ def main() -> None:
     shapes = [(str(r), {"representation": "clump", "resolution": r}) for r in args.resolutions]
     if args.polyhedra:
         shapes.append(("poly", {"representation": "polyhedron"}))
-    results: dict[tuple[str, str], list[int]] = {}
+    results: dict[tuple[str, str], list[int]] = {}  # N_t of the runs that ended ok
+    failed: dict[tuple[str, str], list[str]] = {}  # the others' statuses: never an N_t value
     for seed in range(args.seeds):
         for name in args.sets:
             for resolution, items in shapes:
                 config = base.model_copy(update={"items": base.items.model_copy(update=items)})
                 started = time.perf_counter()
                 r = run_feeder(config, SETS[name], seed)
-                results.setdefault((name, resolution), []).append(r.n_remaining)
+                results.setdefault((name, resolution), [])
+                if r.ok:
+                    results[(name, resolution)].append(r.n_remaining)
+                else:
+                    failed.setdefault((name, resolution), []).append(r.status.value)
                 print(
                     f"{name} res {resolution:>4} seed {seed}: N_t = {r.n_remaining}/{r.n_items}, "
                     f"{r.status.value}, t_end {r.sim_time:.1f} s, "
                     f"{time.perf_counter() - started:.0f} s wall",
                     flush=True,
                 )
-    print("| set | resolution | seeds | N_t values | mean | sd |")
-    print("|---|---|---|---|---|---|")
+    print("| set | resolution | runs ok | N_t values | mean | sd | not measured |")
+    print("|---|---|---|---|---|---|---|")
     for (name, resolution), values in sorted(results.items()):
+        mean = statistics.mean(values) if values else float("nan")
         sd = statistics.stdev(values) if len(values) > 1 else float("nan")
-        print(
-            f"| {name} | {resolution} | {len(values)} | {values} | {statistics.mean(values):.1f} | {sd:.1f} |"
-        )
+        others = ", ".join(failed.get((name, resolution), [])) or "-"
+        print(f"| {name} | {resolution} | {len(values)} | {values} | {mean:.1f} | {sd:.1f} | {others} |")
 
 
 if __name__ == "__main__":
