@@ -342,9 +342,10 @@ class Simulation:
         return self._forced_dt <= automatic * (1 + 1e-9)
 
     def current_overlap(self) -> float:
-        """Largest overlap of the last step's contacts, as a fraction of the smaller radius."""
+        """Largest overlap of the last step's contacts, as a fraction of the smaller
+        ``overlap_scale`` (a sphere's radius, a polyhedron piece's rounding: ``dem/validity.py``)."""
         worst = 0.0
-        radius = self.spheres.radius
+        radius = self.spheres.rounding
         pairs, wall_pairs = self._lists.pairs, self._lists.wall_pairs
         n_pp, n_wp = int(pairs.count[neighbours.N_PAIRS]), int(wall_pairs.count[neighbours.N_PAIRS])
         if n_pp:
@@ -365,8 +366,14 @@ class Simulation:
 
     def _body_overlap(self, body: int) -> float:
         """The deepest overlap of ``body``'s spheres with other bodies' spheres and the walls,
-        as a fraction of the smaller radius, measured at the current state."""
+        as a fraction of the smaller radius, measured at the current state.
+
+        A rounded polyhedron's contacts need the cores' closest features, which only the kernels
+        compute: its figure is the deepest overlap the last step recorded for the body, and at
+        least the limit, since the kernel stopped at a contact beyond it (before recording it)."""
         s = self.spheres
+        if np.any(s.core_count[s.body == body] > 0):
+            return max(self._recorded_overlap(body), self._overlap_limit)
         x, radius, owner = self.sphere_positions(), s.radius, s.body
         mine = np.flatnonzero(owner == body)
         others = np.flatnonzero((owner != body) & self.bodies.active[owner])
@@ -384,6 +391,24 @@ class Simulation:
                 worst = max(worst, (radius[k] - math.sqrt(d2)) / radius[k])
         return max(worst, 0.0)
 
+    def _recorded_overlap(self, body: int) -> float:
+        """The deepest overlap the last step recorded for ``body``'s contacts, as in
+        ``current_overlap``."""
+        owner, scale = self.spheres.body, self.spheres.rounding
+        worst = 0.0
+        for pairs, wall in ((self._lists.pairs, False), (self._lists.wall_pairs, True)):
+            n = int(pairs.count[neighbours.N_PAIRS])
+            delta, i = pairs.delta[:n], pairs.i[:n]
+            if wall:
+                mine, size = owner[i] == body, scale[i]
+            else:
+                j = pairs.j[:n]
+                mine, size = (owner[i] == body) | (owner[j] == body), np.minimum(scale[i], scale[j])
+            mine &= delta > 0
+            if np.any(mine):
+                worst = max(worst, float(np.max(delta[mine] / size[mine])))
+        return worst
+
     def _failure(self, status: int, dt: float, steps: int) -> RunStatus:
         """What a kernel's bad status means: physics beyond the contact model, or numerics."""
         body = int(self._run.counters[L.C_BAD_BODY])
@@ -395,13 +420,15 @@ class Simulation:
             # sqrt(d0^2 + m v^2 / K), and the E that keeps it at the limit scales as its square.
             overlap = self._body_overlap(body)
             speed = float(np.linalg.norm(self.bodies.vel[body]))
-            r = float(self.spheres.radius[self.spheres.body == body].min())
+            own = self.spheres.body == body
+            r = float(self.spheres.rounding[own].min())
+            unit = "its rounding" if np.any(self.spheres.core_count[own] > 0) else "a sphere radius"
             stiffness = wall_stiffness(self.params.E, float(self.bodies.diameter[body]), self.params.E)
             heading = math.sqrt(overlap**2 + float(self.bodies.mass[body]) * speed**2 / (stiffness * r * r))
             self.max_overlap = max(self.max_overlap, heading)
             needed = self.params.E * (heading / self._overlap_limit) ** 2
             message = (
-                f"invalid {where} overlapped {overlap:.2f} of a sphere radius (limit "
+                f"invalid {where} overlapped {overlap:.2f} of {unit} (limit "
                 f"{self._overlap_limit:g}) closing at {speed:.2g} m/s, heading for {heading:.2f}, with "
                 f"a step that resolves the contact (dt={dt:.3g} s): E = {self.params.E:.3g} Pa is too "
                 f"soft for this impact (about {needed:.2g} Pa would keep it within the limit); the "

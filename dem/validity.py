@@ -14,14 +14,28 @@ damping), and the two-exponential peak above it. The clamp against attraction do
 here: the force is compressive all the way to the peak. Inverting for ``delta_max = limit r``
 gives the softest E for which that impact stays valid; ``K = E D / 2`` against a wall of the same
 material.
+
+The length the limit is a fraction of (``overlap_scale``) is a clump's smallest sphere radius and a
+rounded polyhedron's rounding r: its cores are r_a + r_b apart at contact, and the closest
+features that give the normal are those of the cores, so the overlap must stay a fraction of r
+(the kernels compare with the ``rounding`` column, which is a clump sphere's radius).
 """
 
 from __future__ import annotations
 
 import math
 
+from dem.clump import Clump
 from dem.contact import damping_ratio, wall_stiffness
+from dem.polyhedra import Polyhedron
 from dem.result import OVERLAP_LIMIT
+
+
+def overlap_scale(shape: Clump | Polyhedron) -> float:
+    """The length (m) that ``OVERLAP_LIMIT`` is a fraction of for this body's contacts."""
+    if isinstance(shape, Polyhedron):
+        return float(shape.rounding)
+    return float(min(shape.radius))
 
 
 def peak_factor(zeta: float) -> float:
@@ -47,8 +61,8 @@ def peak_overlap(speed: float, mass: float, stiffness: float, e: float) -> float
 def softest_valid_E(
     speed: float, mass: float, diameter: float, radius: float, e: float, limit: float = OVERLAP_LIMIT
 ) -> float:
-    """The E below which a body (mass, contact diameter D, smallest sphere radius r) hitting a
-    wall of its own material at ``speed`` overlaps more than ``limit`` r."""
+    """The E below which a body (mass, contact diameter D, ``overlap_scale`` r) hitting a wall of
+    its own material at ``speed`` overlaps more than ``limit`` r."""
     # delta_max scales as 1 / sqrt(K) and K = E D / 2 is linear in E.
     reference = 1.0
     depth = peak_overlap(speed, mass, wall_stiffness(reference, diameter, reference), e)

@@ -383,7 +383,8 @@ def softest_valid_E(config: FeederConfig, e: float) -> float:
     The hardest impact of a run is an item's drop at insertion: created at most the wall height
     plus the insertion zone above the floor, it lands at ``v = sqrt(2 g h)``. A randomly oriented
     item lands on an edge or a corner, where it is lighter than its mass (its rotation gives way):
-    its smallest effective mass (``dem.timestep.effective_mass``) against its smallest sphere.
+    its smallest effective mass (``dem.timestep.effective_mass``) against its smallest sphere (a
+    rounded polyhedron: its rounding, ``dem.validity.overlap_scale``).
     The estimate is the largest over one nominal item per kind (``items.spread`` moves it by
     about 2 x spread). It is an estimate: a flat landing, or a drop from lower, moves the real
     threshold by a factor of about two either way (measured on the quick feeder at e = 0.5 and
@@ -391,6 +392,7 @@ def softest_valid_E(config: FeederConfig, e: float) -> float:
     2.5e6 Pa).
     """
     from dem.timestep import effective_mass
+    from dem.validity import overlap_scale
     from dem.validity import softest_valid_E as softest
 
     nominal = config.items.model_copy(
@@ -403,7 +405,7 @@ def softest_valid_E(config: FeederConfig, e: float) -> float:
             speed,
             effective_mass(item.shape),
             item.shape.equivalent_diameter,
-            float(np.min(item.shape.radius)),
+            overlap_scale(item.shape),
             e,
         )
         for item in make_items(nominal, np.random.default_rng(0))

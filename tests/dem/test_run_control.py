@@ -227,3 +227,59 @@ def test_overlap_past_the_limit_with_a_step_too_long_is_unstable_with_step_advic
 
     assert report.status == "unstable"
     assert "forced dt exceeds the automatic step" in report.message
+
+
+def _box_impact(E, e, speed):
+    """A rounded box (20 mm thick, r = 4 mm) thrown flat at a floor without gravity."""
+    from dem.contact import ContactParams
+    from dem.polyhedra import Polyhedron
+
+    params = ContactParams(E=E, nu=0.3, e=e, mu=0.0)
+    sim = Simulation(params, gravity=(0, 0, 0), domain_min=(-1, -1, -1), domain_max=(1, 1, 1))
+    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 0.4))
+    box = Polyhedron.box((0.06, 0.04, 0.02), rounding=0.004, density=1000.0)
+    sim.add_body(box, (0, 0, 0.0100001), velocity=(0, 0, -speed))
+    deepest = 0.0
+
+    def watch(s):
+        nonlocal deepest
+        deepest = max(deepest, s.current_overlap())
+
+    report = sim.run(0.02, chunk_time=sim.dt, on_chunk=watch)
+    return sim, box, report, deepest
+
+
+def test_a_rounded_polyhedron_overlap_is_measured_against_its_rounding_and_limited_there():
+    """The limit's length for a rounded polyhedron is its rounding r (``overlap_scale``): the
+    estimate with r separates valid and invalid flat landings, and the figures are fractions of r."""
+    from dem.polyhedra import Polyhedron
+    from dem.validity import overlap_scale, peak_overlap, softest_valid_E
+
+    box = Polyhedron.box((0.06, 0.04, 0.02), rounding=0.004, density=1000.0)
+    assert overlap_scale(box) == 0.004
+    threshold = softest_valid_E(2.0, box.mass, box.equivalent_diameter, overlap_scale(box), e=0.5)
+
+    sim, _, above, deepest = _box_impact(E=1.3 * threshold, e=0.5, speed=2.0)
+    stiffness = 1.3 * threshold * box.equivalent_diameter / 2  # against a wall of the same material
+    assert above.ok, above.message
+    assert deepest * 0.004 == pytest.approx(peak_overlap(2.0, box.mass, stiffness, 0.5), rel=0.02)
+    assert sim.max_overlap == pytest.approx(deepest)
+
+    sim, _, below, _ = _box_impact(E=0.7 * threshold, e=0.5, speed=2.0)
+    assert below.status == "invalid"
+    assert "of its rounding" in below.message and "too soft for this impact" in below.message
+    assert sim.max_overlap == pytest.approx(0.5 / math.sqrt(0.7), rel=0.1)
+
+
+def test_the_feeder_estimates_the_softest_valid_E_of_its_rounded_polyhedra_from_their_rounding():
+    from dem.scenarios.feeder import make_items, softest_valid_E
+    from dem.scenarios.feeder_config import load_feeder_config
+
+    clumps = load_feeder_config("examples/feeder.toml")
+    polyhedra = clumps.model_copy(update={"items": clumps.items.model_copy(update={"representation": "polyhedron"})})
+    nominal = polyhedra.items.model_copy(update={"spread": 0.0})
+    roundings = {item.shape.rounding for item in make_items(nominal, np.random.default_rng(0))}
+
+    # Thinner than the clumps' smallest spheres: the same drop must be stiffer to stay valid.
+    assert max(roundings) < 0.01
+    assert softest_valid_E(polyhedra, 0.5) > 2 * softest_valid_E(clumps, 0.5)
