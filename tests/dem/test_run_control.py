@@ -276,7 +276,8 @@ def test_the_feeder_estimates_the_softest_valid_E_of_its_rounded_polyhedra_from_
     from dem.scenarios.feeder_config import load_feeder_config
 
     clumps = load_feeder_config("examples/feeder.toml")
-    polyhedra = clumps.model_copy(update={"items": clumps.items.model_copy(update={"representation": "polyhedron"})})
+    items = clumps.items.model_copy(update={"representation": "polyhedron"})
+    polyhedra = clumps.model_copy(update={"items": items})
     nominal = polyhedra.items.model_copy(update={"spread": 0.0})
     roundings = {item.shape.rounding for item in make_items(nominal, np.random.default_rng(0))}
 
