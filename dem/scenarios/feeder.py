@@ -457,14 +457,22 @@ def _run(config: FeederConfig, params: dict[str, float], seed: int, control: Run
 
 def estimated_time_step(config: FeederConfig, params: dict[str, float]) -> float:
     """A cheap step estimate (no items built): a fraction of the contact period of a 10 mm steel
-    sphere, ``T_c = pi sqrt(m / K)``, ``K = E D / 2``. Smaller and denser than any item of the
-    feeder's set, so it errs short: more steps, a longer job timeout, never a premature one."""
+    sphere, ``T_c = pi sqrt(m / K)``, with the stiffer of its contacts: ``K = E D / 2`` with
+    another item, the two E in series against a wall of ``E_wall`` (up to twice that). Smaller and
+    denser than any item of the feeder's set, so it errs short: more steps, a longer job timeout,
+    never a premature one."""
+    from dem.contact import wall_stiffness
+
     if config.run.dt:
         return float(config.run.dt)
     young = float(params.get("E", config.params.E))
+    wall = params.get("E_wall", config.params.E_wall)
     diameter, density = 0.01, 8000.0
     mass = density * math.pi * diameter**3 / 6
-    return config.run.dt_fraction * math.pi * math.sqrt(mass / (young * diameter / 2))
+    stiffness = young * diameter / 2
+    if wall is not None:
+        stiffness = max(stiffness, wall_stiffness(young, diameter, float(wall)))
+    return config.run.dt_fraction * math.pi * math.sqrt(mass / stiffness)
 
 
 def estimated_cost(config: FeederConfig, params: dict[str, float]) -> float:

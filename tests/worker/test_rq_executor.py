@@ -9,6 +9,7 @@ simulation through this path is covered in ``tests/e2e/``.
 from __future__ import annotations
 
 import json
+import math
 import multiprocessing
 import time
 
@@ -307,6 +308,17 @@ def test_estimated_time_step_scales_as_one_over_root_e():
     stiff = feeder.time_step({}, {"E": 4e6})
 
     assert stiff == pytest.approx(soft / 2)
+
+
+def test_estimated_time_step_takes_the_stiffer_wall_contact_of_a_harder_wall():
+    feeder = registry.get("feeder")
+    same = feeder.time_step({}, {"E": 1e6})
+    softer_walls = feeder.time_step({}, {"E": 1e6, "E_wall": 1e5})
+    steel_walls = feeder.time_step({}, {"E": 1e6, "E_wall": 2e11})
+
+    assert softer_walls == pytest.approx(same)  # the item-item contact is then the stiffer one
+    # E and E_wall in series: K -> 2 x (E D / 2) as E_wall -> infinity, so the step -> 1 / sqrt(2).
+    assert steel_walls == pytest.approx(same / math.sqrt(2), rel=1e-4)
 
 
 def test_a_running_trial_is_cancelled_and_its_outcome_never_reported(executor, connection, redis_url):
