@@ -60,6 +60,29 @@ INFRASTRUCTURE_ERRORS = (
 )
 
 
+class RunningMarks:
+    """Shows which trials and single simulations a worker has started (queued -> running, with
+    its worker), for ``serve``'s loop and ``demcal calibrate`` alike. Each (trial, worker) is
+    written once, not at every poll: a write takes the study row's lock, and a hundred workers
+    would otherwise cost a hundred writes a second. A trial that a retry starts on another
+    worker, or on the same one after it left the executor's view, is written again."""
+
+    def __init__(self) -> None:
+        self._marked: set[tuple[str, str | None]] = set()
+
+    def update(self, store: SqlStore, executor: Any) -> None:
+        running = getattr(executor, "running", None)
+        if running is None:
+            return
+        now = set(running().items())
+        for trial_id, worker in sorted(now - self._marked, key=lambda pair: pair[0]):
+            if is_simulation_id(trial_id):
+                store.mark_simulation_running(trial_id, worker)
+            else:
+                store.mark_running(trial_id, worker)
+        self._marked = now
+
+
 class _Routed:
     """The executor as the driver sees it: outcomes of single simulations are kept aside for
     the service, so that the driver (which records whatever it polls as trials) never sees them."""
@@ -124,6 +147,7 @@ class DriverLoop:
         # validation batch, a CPU-starved machine) never lets a lease lapse while we drive the
         # study. The lock keeps ``held`` and the leases in step between the two threads.
         self._lease_lock = threading.Lock()
+        self._running_marks = RunningMarks()
         self._lost: set[str] = set()
         self._heartbeat: threading.Thread | None = None
 
@@ -224,15 +248,7 @@ class DriverLoop:
             self._step(study_id, 0)  # deleted, or finished by another process
 
     def _mark_running(self) -> None:
-        """Show which trials a worker has started (queued -> running) and on which worker."""
-        running = getattr(self.executor, "running", None)
-        if running is None:
-            return
-        for trial_id, worker in running().items():
-            if is_simulation_id(trial_id):
-                self.store.mark_simulation_running(trial_id, worker)
-            else:
-                self.store.mark_running(trial_id, worker)
+        self._running_marks.update(self.store, self.executor)
 
     def _beat(self) -> None:
         """The heartbeat thread: renew every held lease a few times per TTL."""

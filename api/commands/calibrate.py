@@ -148,6 +148,7 @@ def _resume(store, study_id: str, leases) -> str:
 def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
     from rich.console import Console
 
+    from api.driver_loop import RunningMarks
     from api.settings import get_settings
     from optimizer.driver import Driver
     from optimizer.protocols import StudyStatus
@@ -158,10 +159,12 @@ def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
     executor = LocalPoolExecutor(workers, snapshot_root=settings.snapshot_root, nice=settings.worker_nice)
     driver = Driver(store, executor)
     renewed = time.monotonic()
+    marks = RunningMarks()  # what `demcal studies show`, the API and the dashboard see running
 
     def on_progress(progress) -> None:
         nonlocal renewed
         live.update(progress)
+        marks.update(store, executor)
         if time.monotonic() - renewed >= leases.renew_every_s:
             renewed = time.monotonic()
             if not leases.renew(study_id):

@@ -147,6 +147,13 @@ def test_tiny_study_runs_and_writes_its_results(tmp_path):
     assert len((folder / "trials.csv").read_text().splitlines()) == 1 + 4
     assert (folder / "pareto.png").stat().st_size > 0
     assert "Pareto front" in output
+    # What the API and the dashboard show of a CLI study: each trial was marked running when
+    # a local worker took it (it stayed "queued" until its result before).
+    with sa.create_engine(f"sqlite:///{tmp_path}/demcal.db").connect() as db:
+        rows = db.execute(sa.text("SELECT started_at, finished_at, worker FROM trials")).all()
+    assert len(rows) == 4
+    assert all(started and started <= finished for started, finished, _ in rows), rows
+    assert all(worker.startswith("local-") for _, _, worker in rows), rows
 
 
 def test_a_study_whose_every_run_fails_ends_with_the_failures_and_no_recommendation(tmp_path):

@@ -162,6 +162,38 @@ def test_a_trial_a_worker_started_shows_running_at_the_next_tick_not_the_next_sc
         executor.close()
 
 
+def test_a_running_trial_is_written_once_per_worker_not_at_every_tick(store, monkeypatch):
+    from api.driver_loop import RunningMarks
+
+    study_id = create(store)
+    loop_on(store, SyntheticExecutor(per_poll=0)).tick()  # the first batch is queued, none runs
+    trial = store.trials(study_id, [TrialState.QUEUED])[0].spec.trial_id
+    written: list[tuple[str, str]] = []
+    mark = store.mark_running
+    monkeypatch.setattr(store, "mark_running", lambda t, w=None: (written.append((t, w)), mark(t, w)))
+
+    class Workers:
+        now: dict[str, str] = {trial: "w1"}
+
+        def running(self) -> dict[str, str]:
+            return dict(self.now)
+
+    marks, workers = RunningMarks(), Workers()
+    for _ in range(3):
+        marks.update(store, workers)
+    assert written == [(trial, "w1")]
+    assert {t.spec.trial_id: t.worker for t in store.trials(study_id, [TrialState.RUNNING])} == {trial: "w1"}
+
+    workers.now = {}  # lost with w1; sent again (queued), then taken by w2
+    marks.update(store, workers)
+    store.mark_queued([trial])
+    workers.now = {trial: "w2"}
+    marks.update(store, workers)
+    marks.update(store, workers)
+    assert written == [(trial, "w1"), (trial, "w2")]
+    assert store.trials(study_id, [TrialState.RUNNING])[0].worker == "w2"
+
+
 def test_a_poll_reads_only_the_trials_written_since_the_last_and_never_a_simulation_per_result(store, engine):
     import sqlalchemy as sa
 
