@@ -561,6 +561,20 @@ def test_failed_runs_are_drawn_apart_and_counted_by_status(page, dashboard):
     save_screenshot(page, "dashboard-failures")
 
 
+def test_the_recommendation_and_progress_are_drawn_while_identifiability_is_still_building(page, dashboard):
+    held: list = []
+    page.route("**/identifiability", lambda route: held.append(route))  # never answered: a slow first build
+    page.goto(dashboard.url(f"/studies/{dashboard.study.study_id}"))
+
+    page.wait_for_function(PLOTTED, arg="progress-plot")
+    intro = "() => document.querySelector('#recommendation p')?.textContent.startsWith('The fastest')"
+    page.wait_for_function(intro)
+
+    assert held, "the page asked for identifiability"
+    assert page.locator("#identifiability-basis").inner_text() == "Loading…"
+    assert page.errors == []
+
+
 def test_the_validation_table_shows_what_the_driver_stored_after_validating(page, dashboard):
     study_id = seed_validated_study(dashboard.store)
     stored = dashboard.store.get_study(study_id).recommendation

@@ -33,6 +33,7 @@ let responses = []; // the experiments' responses with units (api.js experimentR
 let cursor = null; // the study's change number at the last page: the next poll asks for later ones
 const VIEWS = ["recommendation", "progress", "identifiability"];
 let viewsRead = null; // the study's version the views were read at
+let viewsBeingRead = null; // the promise of the views being read (readViews), if any
 const views = {}; // each view's last answer: { body, current, retryAt } (current: not a stale version)
 
 // One request for the first page (it says how many match), then the rest in parallel.
@@ -278,12 +279,11 @@ function renderValidation(rows, measured) {
     el("td", {}, el("span", { class: `status ${VALIDATION_CLASS[row.verdict] || ""}`, text: row.verdict })))));
 }
 
-async function renderProgress(progress, identified) {
+async function renderProgress(progress) {
   await plotlyReady();
   const figure = progressFigure(progress, study.f1_unit);
   Plotly.react("progress-plot", figure.data, figure.layout, CONFIG);
   document.getElementById("progress-caption").textContent = figure.caption;
-  renderIdentifiability(identified);
 }
 
 const VERDICT_CLASS = { pinned: "ok", weak: "paused", "not identifiable": "failed" };
@@ -332,6 +332,13 @@ function renderIdentifiability(identified) {
       ...alone.map((x) => el("td", {}, verdictBadge(own(x, entry.name)))))));
 }
 
+// How each polled view (VIEWS) is drawn.
+const RENDER_VIEW = {
+  recommendation: renderRecommendation,
+  progress: renderProgress,
+  identifiability: renderIdentifiability,
+};
+
 async function refresh() {
   const first = study === null;
   let changed;
@@ -356,28 +363,43 @@ async function refresh() {
     changed = await loadTrialChanges();
   }
   if (changed) await renderPlots();
-  // Every view when the study changed; otherwise only those last answered with a stale version;
-  // neither before the time a stale answer gave (the server would answer it again as it was).
-  const version = study.version;
-  const due = VIEWS.filter((name) => (version !== viewsRead || !views[name].current)
-    && !(views[name] && Date.now() < views[name].retryAt));
-  const answers = await Promise.all(due.map((name) => view(`${base}/${name}`)));
-  due.forEach((name, i) => { views[name] = answers[i]; });
-  viewsRead = version;
-  // The recommendation's tables count each set's runs in the trials loaded: redrawn when they change.
-  if (due.includes("recommendation") || changed) renderRecommendation(views.recommendation.body);
-  if (due.includes("progress") || due.includes("identifiability")) {
-    await renderProgress(views.progress.body, views.identifiability.body);
-  }
   clearBanner();
+  const reading = viewsBeingRead ? [] : readViews();
+  // The recommendation's tables count each set's runs in the trials loaded: redrawn when they change.
+  if (changed && views.recommendation && !reading.includes("recommendation")) {
+    renderRecommendation(views.recommendation.body);
+  }
   // Keep polling a finished study until one quiet round has confirmed the last changes and every
   // view it shows is current: a stale one (identifiability resting between builds) is asked for
   // again once its Retry-After has passed, and no sooner.
   if (!TERMINAL.has(study.status) || changed !== 0) return true;
-  const stale = VIEWS.filter((name) => !views[name].current);
+  if (viewsBeingRead) await viewsBeingRead;
+  const stale = VIEWS.filter((name) => !views[name]?.current);
   if (!stale.length) return false;
-  const retryAt = Math.min(...stale.map((name) => views[name].retryAt));
+  const retryAt = Math.min(...stale.map((name) => views[name]?.retryAt ?? 0));
   return Math.max(POLL_MS, retryAt - Date.now());
+}
+
+// Reads the views that are due, in the background: the trials' poll goes on meanwhile (a view's
+// first build can take seconds on a long study, and new results must not wait behind it), and
+// each view is drawn as soon as it arrives (the recommendation and progress do not wait for
+// identifiability; the page said "No recommendation yet" meanwhile, for a study that had one).
+// Due: every view when the study changed; otherwise those last answered with a stale version;
+// neither before the time a stale answer gave (the server would answer it again as it was).
+// Returns the names being read.
+function readViews() {
+  const version = study.version;
+  const due = VIEWS.filter((name) => (version !== viewsRead || !views[name]?.current)
+    && !(views[name] && Date.now() < views[name].retryAt));
+  if (!due.length) return due;
+  viewsBeingRead = Promise.all(due.map(async (name) => {
+    views[name] = await view(`${base}/${name}`);
+    await RENDER_VIEW[name](views[name].body);
+  })).then(() => { viewsRead = version; }, (error) => {
+    if (!(error instanceof ApiError)) console.error(error);
+    showBanner(`Could not refresh: ${error.message}`);
+  }).finally(() => { viewsBeingRead = null; });
+  return due;
 }
 
 async function act(action) {
