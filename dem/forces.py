@@ -35,7 +35,7 @@ import math
 
 import numba
 
-from dem.conf import JIT_FLAGS
+from dem.conf import JIT_FLAGS, STEP_FLAGS
 from dem.contact import (
     N_SUMS,
     PairLaw,
@@ -169,13 +169,14 @@ def body_pair_laws(pairs, sbody, bodies, material):
         grp_law[g, G_CT], grp_law[g, G_MU] = law.c_t, law.mu
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_limit, hist_dt):
     """Gravity plus all contact forces and torques.
 
     Returns (sphere contacts carrying force, for the cost; the body whose overlap exceeds
     ``overlap_limit`` of a sphere radius, or -1). ``hist_dt`` advances the tangential springs
-    (0 re-evaluates forces without advancing them).
+    (0 re-evaluates forces without advancing them). Compiled without numba's runtime
+    (``dem/conf.py``: ``STEP_FLAGS``): it must not allocate nor return an array.
     """
     force, torque, mass = bodies.force, bodies.torque, bodies.mass
     for b in range(mass.shape[0]):

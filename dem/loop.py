@@ -21,7 +21,10 @@ call that is passed a container costs an atomic reference count up and down for 
 it, a few hundred a step, which was a fixed cost of several us a step whatever the number of
 particles (``benchmarks/README.md``, engine speed session 8). ``compute_forces`` itself stays a
 call: ``run_steps`` calls it at two sites, and two inlined copies of the force passes doubled the
-cold compile.
+cold compile. The steps themselves run in ``_steps``, which like ``compute_forces`` is compiled
+without numba's runtime (``dem/conf.py``: ``STEP_FLAGS``), so that binding a container's arrays
+costs no reference counts at all (about 150 atomic pairs a step were left, 2 us of a one-sphere
+step); ``run_steps`` keeps what allocates (the live rows, listed again when bodies leave).
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from dem.conf import JIT_FLAGS
+from dem.conf import JIT_FLAGS, STEP_FLAGS
 from dem.forces import body_pair_laws, compute_forces
 from dem.integrate import drift, kick, live_rows, update_omega, update_spheres
 from dem.materials import MaterialArrays
@@ -53,6 +56,7 @@ C_BAD_BODY = 3  # the body an unstable status is about
 C_MIDSTEP = 4  # a STATUS_CAPACITY came after the drift of a step (resume finishes it)
 C_CONTACTS = 5  # force-carrying sphere contacts at the last step
 N_COUNTERS = 6
+_BODIES_LEFT = -1  # ``_steps``: bodies left the domain after the step at counters[C_STEPS]
 # Layout of ``RunState.clock``.
 K_T, K_COST = 0, 1
 
@@ -105,8 +109,6 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
     drift of a step for lack of list capacity; finish that step first.
     """
     clk, cnt = run.clock, run.counters
-    half = 0.5 * dt
-    skin = settings.skin
     lb = np.zeros(3)
     cnt[C_STEPS] = 0
     live, live_spheres = live_rows(bodies.active, spheres.body)
@@ -126,7 +128,44 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
             cnt[C_BAD_BODY] = bad
             return STATUS_UNSTABLE_OVERLAP
 
-    step = 0
+    while True:
+        status = _steps(
+            n_steps,
+            dt,
+            resume,
+            force_rebuild,
+            live,
+            live_spheres,
+            lb,
+            run,
+            settings,
+            bodies,
+            spheres,
+            walls,
+            lists,
+        )
+        if status != _BODIES_LEFT:
+            break
+        live, live_spheres = live_rows(bodies.active, spheres.body)
+        resume = False
+        force_rebuild = True
+    if status == STATUS_OK:
+        update_omega(bodies, live)
+    return status
+
+
+@numba.njit(**STEP_FLAGS)
+def _steps(
+    n_steps, dt, resume, force_rebuild, live, live_spheres, lb, run, settings, bodies, spheres, walls, lists
+):
+    """The steps of ``run_steps`` from step ``counters[C_STEPS]`` until ``n_steps`` (``STATUS_OK``),
+    an unstable state or a full list (their status), or a step after which bodies left the domain
+    (``_BODIES_LEFT``: the caller lists the live rows again, which allocates). Compiled without
+    numba's runtime (``dem/conf.py``: ``STEP_FLAGS``): no reference counts in the step loop."""
+    clk, cnt = run.clock, run.counters
+    half = 0.5 * dt
+    skin = settings.skin
+    step = cnt[C_STEPS]
     while step < n_steps:
         if not resume:
             kick(bodies, live, half)
@@ -159,9 +198,7 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
         if status != STATUS_OK:
             return status
         if n_left > 0:
-            live, live_spheres = live_rows(bodies.active, spheres.body)
-            force_rebuild = True
-    update_omega(bodies, live)
+            return _BODIES_LEFT
     return STATUS_OK
 
 

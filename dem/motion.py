@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from dem.conf import JIT_FLAGS
+from dem.conf import JIT_FLAGS, STEP_FLAGS
 from dem.frames import norm
 
 # Layout of a motion row: kind, direction (3), amplitude, frequency, start_time, ramp_time, phase.
@@ -144,7 +144,7 @@ def evaluate(row, t):
     return disp, vel, acc
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def evaluate_into(row, t, disp, vel):
     """Displacement and velocity of a motion row at time t written into ``disp`` and ``vel``;
     the step kernel's allocation-free form of ``evaluate``."""
