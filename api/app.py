@@ -8,6 +8,7 @@ a service with several replicas must not race to alter its schema.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 
 import sqlalchemy as sa
@@ -22,6 +23,7 @@ from api.deps import reject_impossible_ids, reject_unknown_query
 from api.errors import PayloadTooLargeError, install_error_handlers
 from api.routes import health, metrics, shapes, simulations, studies, trials
 from api.schemas import ErrorDetail
+from api.services.offload import ViewProcesses
 from api.services.views import StudyViewCache
 from api.settings import Settings
 from api.store import SqlStore
@@ -87,6 +89,12 @@ class BodySizeLimit:
         await self.app(scope, counting_receive, send)
 
 
+@contextlib.asynccontextmanager
+async def _lifespan(app: FastAPI):
+    yield
+    app.state.study_views.close()  # the view-building processes end with the app
+
+
 def create_app(settings: Settings, engine: sa.Engine | None = None) -> FastAPI:
     """The REST API on the database of ``settings`` (or the given engine)."""
     engine = engine if engine is not None else create_db_engine(settings.database_url)
@@ -97,11 +105,15 @@ def create_app(settings: Settings, engine: sa.Engine | None = None) -> FastAPI:
         summary="Calibrate DEM contact parameters with a multi-objective genetic algorithm.",
         description="Every endpoint except /healthz needs `Authorization: Bearer <key>` "
         "(`demcal apikey create`). Errors are `{\"detail\": \"what to fix\"}` with a 4xx status.",
+        lifespan=_lifespan,
     )
     app.state.settings = settings
     app.state.store = SqlStore(engine)
     app.state.key_cache = KeyCache(settings.api_key_cache_s)
-    app.state.study_views = StudyViewCache(max_kept_studies=settings.view_kept_studies)
+    processes = None  # views built on the server's threads
+    if settings.view_processes:
+        processes = ViewProcesses(settings.view_processes, settings.view_kept_studies)
+    app.state.study_views = StudyViewCache(max_kept_studies=settings.view_kept_studies, processes=processes)
     install_error_handlers(app)
     strict_query = [Depends(reject_unknown_query), Depends(reject_impossible_ids)]
     for module in (studies, trials, simulations, shapes, metrics):

@@ -69,6 +69,12 @@ class Settings(BaseSettings):
         "(progress keeps each trial's record, about 4 kB a trial); a study polled after more others "
         "than this is read whole again.",
     )
+    view_processes: int = Field(
+        2, ge=0, le=8,
+        description="Processes that build the polled views (recommendation, progress, Pareto front) "
+        "off the server's process, so that no build holds its GIL while requests wait; 0 = on the "
+        "server's threads.",
+    )
     api_key_cache_s: float = Field(
         1.0, ge=0, le=60,
         description="Seconds a verified API key is remembered; a revoked key works at most this long.",

@@ -26,6 +26,7 @@ from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import get_context
 
 from api.db import create_db_engine
+from api.services.views import StudyViewCache
 from api.store import SqlStore
 
 log = logging.getLogger(__name__)
@@ -41,7 +42,7 @@ def in_child(build: Callable[[SqlStore, str], bytes], store: SqlStore, study_id:
     this thread for a database only this process can see."""
     global _pool
     url = store.engine.url
-    if url.get_backend_name() == "sqlite" and url.database in (None, "", ":memory:"):
+    if not shared_database(url):
         return build(store, study_id)
     with _lock:
         if _pool is None:
@@ -64,7 +65,10 @@ def _start_child(server_pid: int) -> None:
     holds both ends of its task pipe, so it never sees the server die (SIGKILL, or a SIGTERM that
     outlived its grace period) and would wait for tasks forever."""
     os.nice(NICE)
+    _watch_server(server_pid)
 
+
+def _watch_server(server_pid: int) -> None:
     def watch() -> None:
         while os.getppid() == server_pid:
             time.sleep(1.0)
@@ -80,3 +84,96 @@ def _run(build: Callable[[SqlStore, str], bytes], url: str, study_id: str) -> by
     if url not in _stores:
         _stores[url] = SqlStore(create_db_engine(url))
     return build(_stores[url], study_id)
+
+
+class ViewProcesses:
+    """Child processes that build views polled by every open page (the recommendation, progress,
+    the Pareto front) from the database themselves, so that no build holds the server's GIL while
+    requests wait: built on the server's threads, their bursts after each batch (a fold over the
+    study's records, hundreds of rows decoded and serialised) stalled its event loop 222-245 ms on
+    a quiet machine, the bulk of the polls' p99 (``benchmarks/README.md``, API session 8, part 2).
+
+    ``processes`` single-process lanes (spawn, started at a lane's first build, at the server's own
+    priority: requests wait for these builds): progress, whose trackers a lane keeps between builds
+    (as ``StudyViewCache.kept`` in the server did, ``max_kept_studies`` studies), always builds in
+    lane 0, every other view in the last lane, so that a long fold does not delay them. A lane whose
+    process died is replaced and the build tried once more; ``close`` ends them with the app. A
+    build's function (``fn(store, views, study_id, *args)``, ``views`` the lane's own cache for
+    ``kept``) and arguments must pickle; its bytes are the caller's."""
+
+    KEPT_VIEWS = frozenset({"progress"})
+
+    def __init__(self, processes: int = 2, max_kept_studies: int = 64) -> None:
+        if processes < 1:
+            raise ValueError("processes must be at least 1")
+        self.max_kept_studies = max_kept_studies
+        self._lanes: list[ProcessPoolExecutor | None] = [None] * processes
+        self._lock = threading.Lock()
+
+    def lane(self, view: str) -> int:
+        return 0 if view in self.KEPT_VIEWS else len(self._lanes) - 1
+
+    def build(self, view: str, fn: Callable[..., bytes], url: str, study_id: str, *args) -> bytes:
+        """``fn(store, views, study_id, *args)`` in the view's lane, on a store of ``url``; the
+        calling thread waits (without the GIL)."""
+        index = self.lane(view)
+        for attempt in (1, 2):
+            executor = self._executor(index)
+            try:
+                return executor.submit(_build_view, fn, url, study_id, args).result()
+            except BrokenProcessPool:
+                log.warning("view-building process %d died (%s of study %s); starting another",
+                            index, view, study_id)
+                with self._lock:
+                    if self._lanes[index] is executor:
+                        self._lanes[index] = None
+                if attempt == 2:
+                    raise
+        raise AssertionError("unreachable")
+
+    def _executor(self, index: int) -> ProcessPoolExecutor:
+        with self._lock:
+            executor = self._lanes[index]
+            if executor is None:
+                executor = self._lanes[index] = ProcessPoolExecutor(
+                    1, mp_context=get_context("spawn"), initializer=_start_view_child,
+                    initargs=(os.getpid(), self.max_kept_studies),
+                )
+            return executor
+
+    def pids(self) -> list[int]:
+        """The live lanes' process ids (for tests and measurements)."""
+        with self._lock:
+            return [pid for executor in self._lanes if executor is not None
+                    for pid in getattr(executor, "_processes", {}) or {}]
+
+    def close(self) -> None:
+        """End the lanes' processes (a build after this starts them again)."""
+        with self._lock:
+            lanes, self._lanes = self._lanes, [None] * len(self._lanes)
+        for executor in lanes:
+            if executor is not None:
+                executor.shutdown(wait=True, cancel_futures=True)
+
+
+def shared_database(url) -> bool:
+    """Whether another process can open the database at ``url`` (not SQLite in memory)."""
+    return not (url.get_backend_name() == "sqlite" and url.database in (None, "", ":memory:"))
+
+
+_view_caches: dict[str, StudyViewCache] = {}  # in a lane: one StudyViewCache (for ``kept``) per database
+_max_kept_studies = 64
+
+
+def _start_view_child(server_pid: int, max_kept_studies: int) -> None:
+    global _max_kept_studies
+    _max_kept_studies = max_kept_studies
+    _watch_server(server_pid)
+
+
+def _build_view(fn: Callable[..., bytes], url: str, study_id: str, args: tuple) -> bytes:
+    if url not in _stores:
+        _stores[url] = SqlStore(create_db_engine(url))
+    if url not in _view_caches:
+        _view_caches[url] = StudyViewCache(max_kept_studies=_max_kept_studies)
+    return fn(_stores[url], _view_caches[url], study_id, *args)

@@ -41,21 +41,7 @@ def progress_json(
     store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, held: str | None = None
 ) -> Served:
     study = store.study_version(study_id, principal.visible_to)
-
-    def build() -> bytes:
-        record = store.load_study(study_id)
-        validation = (record.recommendation or {}).get("validation", [])
-        folded = views.kept("progress", study_id, _Folded)
-        with folded.lock:
-            if folded.tracker is None:
-                folded.tracker = ProgressTracker(StudyDefinition.model_validate(record.definition))
-            tracker = folded.tracker
-            if tracker.next_batch < record.generation:
-                tracker.advance(store.batch_trials(study_id, tracker.next_batch, record.generation),
-                                record.generation)
-            progress = tracker.progress(validation)
-        return StudyProgressRead(study_id=study_id, **progress.as_json()).model_dump_json().encode()
-
+    build = views.builder("progress", _progress, store, study_id)
     return views.serve("progress", study_id, study.change_number, build, stale_ok=True, held=held)
 
 
@@ -72,6 +58,23 @@ def identifiability_json(
     return views.serve(
         "identifiability", study_id, version, build, stale_ok=True, rest=IDENTIFIABILITY_REST, held=held
     )
+
+
+def _progress(store: SqlStore, views: StudyViewCache, study_id: str) -> bytes:
+    """Progress as JSON, folding only the batches completed since the tracker ``views`` keeps for the
+    study (a view-building process's own cache, or the server's)."""
+    record = store.load_study(study_id)
+    validation = (record.recommendation or {}).get("validation", [])
+    folded = views.kept("progress", study_id, _Folded)
+    with folded.lock:
+        if folded.tracker is None:
+            folded.tracker = ProgressTracker(StudyDefinition.model_validate(record.definition))
+        tracker = folded.tracker
+        if tracker.next_batch < record.generation:
+            tracker.advance(store.batch_trials(study_id, tracker.next_batch, record.generation),
+                            record.generation)
+        progress = tracker.progress(validation)
+    return StudyProgressRead(study_id=study_id, **progress.as_json()).model_dump_json().encode()
 
 
 def _identifiability(store: SqlStore, study_id: str) -> bytes:

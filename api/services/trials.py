@@ -144,18 +144,20 @@ def pareto_front_json(
     """The ``ParetoFront`` as JSON bytes, built once per version of the study row (see ``views``;
     ``held``: the client's ``If-None-Match``)."""
     study = store.study_version(study_id, principal.visible_to)
-
-    def build() -> bytes:
-        rows = [row for row in store.pareto_columns(study_id) if not is_failed(row.status)]
-        points = sorted(
-            (point for point in map(_point_item, rows) if point["f1"] is not None),
-            key=lambda p: (_sort_key(p["f1"]), _sort_key(p["f2"])),
-        )
-        generations = store.load_study(study_id).definition.get("ga", {}).get("generations")
-        latest = latest_generation(study.generation, generations)
-        return _json({"study_id": study_id, "generation": latest, "points": points})
-
+    build = views.builder("pareto", _pareto_front, store, study_id, study.generation)
     return views.serve("pareto", study_id, study.change_number, build, held=held)
+
+
+def _pareto_front(store: SqlStore, views: StudyViewCache, study_id: str, generation: int) -> bytes:
+    """The front's JSON, ``generation`` the study's as its version was read."""
+    rows = [row for row in store.pareto_columns(study_id) if not is_failed(row.status)]
+    points = sorted(
+        (point for point in map(_point_item, rows) if point["f1"] is not None),
+        key=lambda p: (_sort_key(p["f1"]), _sort_key(p["f2"])),
+    )
+    generations = store.load_study(study_id).definition.get("ga", {}).get("generations")
+    return _json({"study_id": study_id, "generation": latest_generation(generation, generations),
+                  "points": points})
 
 
 def _sort_key(value: float | None) -> float:
@@ -181,8 +183,12 @@ def recommendation_json(
     row, while dashboards read it after each such change (``held``: the client's
     ``If-None-Match``)."""
     study = store.study_version(study_id, principal.visible_to)
-    return views.serve("recommendation", study_id, study.change_number,
-                       lambda: _json(_recommendation(store, study_id)), held=held)
+    build = views.builder("recommendation", _recommendation_json, store, study_id)
+    return views.serve("recommendation", study_id, study.change_number, build, held=held)
+
+
+def _recommendation_json(store: SqlStore, views: StudyViewCache, study_id: str) -> bytes:
+    return _json(_recommendation(store, study_id))
 
 
 def _recommendation(store: SqlStore, study_id: str) -> dict:

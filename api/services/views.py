@@ -111,8 +111,9 @@ def _held_at(held: str, version: Hashable) -> str | None:
 class StudyViewCache:
     """Serialised views by (view, study id), each valid for one version; least recently used out."""
 
-    def __init__(self, max_entries: int = 512, max_kept_studies: int = 64) -> None:
+    def __init__(self, max_entries: int = 512, max_kept_studies: int = 64, processes=None) -> None:
         self.max_entries = max_entries
+        self.processes = processes  # offload.ViewProcesses, or None: views are built on this thread
         self.max_kept_studies = max_kept_studies  # progress keeps a study's records: large
         # (view, study id) -> (version, bytes, their digest)
         self._entries: OrderedDict[tuple[str, str], tuple[Hashable, bytes, str]] = OrderedDict()
@@ -123,6 +124,26 @@ class StudyViewCache:
         self._took: dict[tuple[str, str], float] = {}  # (view, study id) -> its last build's seconds
         self._started: dict[tuple[str, str], float] = {}  # (view, study id) -> monotonic start of its refresh
         self._lock = threading.Lock()
+
+    def builder(
+        self, view: str, fn: Callable[..., bytes], store, study_id: str, *args
+    ) -> Callable[[], bytes]:
+        """A build of ``view``: ``fn(store, views, study_id, *args)`` (``views`` for ``kept``), in a
+        view-building process (``processes``, on a store of the same database, with its own
+        ``kept`` objects) if there is one and it can open the database, else on the calling
+        thread with this cache. ``fn`` and ``args`` must pickle; the bytes are the same."""
+        from api.services.offload import shared_database
+
+        url = store.engine.url
+        if self.processes is None or not shared_database(url):
+            return lambda: fn(store, self, study_id, *args)
+        rendered = url.render_as_string(hide_password=False)
+        return lambda: self.processes.build(view, fn, rendered, study_id, *args)
+
+    def close(self) -> None:
+        """End the view-building processes, if any (with the app)."""
+        if self.processes is not None:
+            self.processes.close()
 
     def get_or_build(
         self, view: str, study_id: str, version: Hashable, build: Callable[[], bytes], stale_ok: bool = False

@@ -93,6 +93,7 @@ def settings(database_url, tmp_path):
     return load_settings(
         database_url=database_url, data_dir=tmp_path / "data", max_population=100, max_simulations=2000,
         max_request_bytes=64_000, max_upload_bytes=200_000,
+        view_processes=0,  # views built in place; test_view_processes.py builds them in processes
     )
 
 
