@@ -1,5 +1,6 @@
-"""Views too expensive for the server's own process, built in one child process at a lower CPU
-priority.
+"""Views built outside the server's process: identifiability in one child at a lower CPU priority
+(``in_child``), the views every page polls in view-building processes at the server's own
+priority (``ViewProcesses``, below).
 
 Identifiability reads and evaluates every trial of a study and fits a Gaussian process: about 7 s
 of CPU for 10,000 trials, once per batch. Built on a thread of the server, it held the GIL and the

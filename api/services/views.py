@@ -45,6 +45,15 @@ answered from the digest, and its 304 carries the new ETag, which the client kee
 alone, such views were sent again after every change of the study (benchmarks/README.md,
 sessions 7 and 8).
 
+Where a view is built: the polled views that cost milliseconds of CPU a version (the
+recommendation, progress, the Pareto front) are built by ``builder``, in a view-building process
+(``offload.ViewProcesses``, ``DEMCAL_VIEW_PROCESSES``, the default of ``demcal serve``) that reads
+the database itself, while the request's thread waits without the GIL; built on the server's
+threads, their bursts after each batch held the GIL while every page asked for them, and the event
+loop stalled 222-245 ms (benchmarks/README.md, API session 8, part 2). Versions, ETags, single
+flight, stale answers and rests are this cache's, wherever the bytes were built; a view's ``kept``
+objects live where it is built (a process keeps its own).
+
 What it must not do: decide what a view contains (``api/services/trials.py`` does).
 """
 

@@ -127,3 +127,16 @@ def test_the_event_loop_answers_while_a_build_holds_the_gil(settings, engine, st
     longest = float(built)
     assert longest > 0.1  # the build held the GIL in stretches this long...
     assert len(latencies) > 20 and max(latencies) < longest / 2, (max(latencies), longest)  # ...not here
+
+
+def test_a_database_in_this_process_only_is_built_here(processes):
+    from api.db import create_db_engine
+    from api.models import Base
+    from api.store import SqlStore
+
+    engine = create_db_engine("sqlite://")
+    Base.metadata.create_all(engine)  # in this connection's memory: no other process sees it
+    views = StudyViewCache(processes=processes)
+
+    assert views.builder("pareto", _where_built, SqlStore(engine), "s1")() == str(os.getpid()).encode()
+    assert processes.pids() == []
