@@ -17,6 +17,7 @@ caller's function does).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import threading
@@ -107,9 +108,7 @@ class ViewProcesses:
     def __init__(self, processes: int = 2, max_kept_studies: int = 64) -> None:
         if processes < 1:
             raise ValueError("processes must be at least 1")
-        self.max_kept_studies = max_kept_studies
-        self._lanes: list[ProcessPoolExecutor | None] = [None] * processes
-        self._lock = threading.Lock()
+        self._lanes = [_Lane(max_kept_studies) for _ in range(processes)]
 
     def lane(self, view: str) -> int:
         return 0 if view in self.KEPT_VIEWS else len(self._lanes) - 1
@@ -117,44 +116,77 @@ class ViewProcesses:
     def build(self, view: str, fn: Callable[..., bytes], url: str, study_id: str, *args) -> bytes:
         """``fn(store, views, study_id, *args)`` in the view's lane, on a store of ``url``; the
         calling thread waits (without the GIL)."""
-        index = self.lane(view)
-        for attempt in (1, 2):
-            executor = self._executor(index)
-            try:
-                return executor.submit(_build_view, fn, url, study_id, args).result()
-            except BrokenProcessPool:
-                log.warning("view-building process %d died (%s of study %s); starting another",
-                            index, view, study_id)
-                with self._lock:
-                    if self._lanes[index] is executor:
-                        self._lanes[index] = None
-                if attempt == 2:
-                    raise
-        raise AssertionError("unreachable")
-
-    def _executor(self, index: int) -> ProcessPoolExecutor:
-        with self._lock:
-            executor = self._lanes[index]
-            if executor is None:
-                executor = self._lanes[index] = ProcessPoolExecutor(
-                    1, mp_context=get_context("spawn"), initializer=_start_view_child,
-                    initargs=(os.getpid(), self.max_kept_studies),
-                )
-            return executor
+        return self._lanes[self.lane(view)].call(view, fn, url, study_id, args)
 
     def pids(self) -> list[int]:
         """The live lanes' process ids (for tests and measurements)."""
-        with self._lock:
-            return [pid for executor in self._lanes if executor is not None
-                    for pid in getattr(executor, "_processes", {}) or {}]
+        return [lane.process.pid for lane in self._lanes
+                if lane.process is not None and lane.process.is_alive()]
 
     def close(self) -> None:
         """End the lanes' processes (a build after this starts them again)."""
-        with self._lock:
-            lanes, self._lanes = self._lanes, [None] * len(self._lanes)
-        for executor in lanes:
-            if executor is not None:
-                executor.shutdown(wait=True, cancel_futures=True)
+        for lane in self._lanes:
+            lane.close()
+
+
+class _Lane:
+    """One view-building process, spoken to over a pipe by the thread that waits for the build
+    (one build at a time): no helper thread of the server's process has to win the GIL to pass a
+    build on or hand its result back, as a process pool's two do."""
+
+    def __init__(self, max_kept_studies: int) -> None:
+        self.max_kept_studies = max_kept_studies
+        self.lock = threading.Lock()
+        self.process = None
+        self.conn = None
+
+    def call(self, view: str, fn: Callable[..., bytes], url: str, study_id: str, args: tuple) -> bytes:
+        with self.lock:
+            for attempt in (1, 2):
+                if self.process is None or not self.process.is_alive():
+                    self._start()
+                try:
+                    self.conn.send((fn, url, study_id, args))
+                    ok, value = self.conn.recv()
+                except (EOFError, OSError):
+                    log.warning("a view-building process died (%s of study %s); starting another",
+                                view, study_id)
+                    self._stop()
+                    if attempt == 2:
+                        raise RuntimeError(f"the view-building process died building {view}") from None
+                    continue
+                if ok:
+                    return value
+                raise value
+        raise AssertionError("unreachable")
+
+    def _start(self) -> None:
+        context = get_context("spawn")
+        mine, theirs = context.Pipe()
+        self.process = context.Process(
+            target=_lane_main, args=(theirs, os.getpid(), self.max_kept_studies), name="demcal-views",
+            daemon=True,
+        )
+        self.process.start()
+        theirs.close()
+        self.conn = mine
+
+    def _stop(self) -> None:
+        if self.conn is not None:
+            self.conn.close()
+        if self.process is not None:
+            self.process.join(1)
+            if self.process.is_alive():
+                self.process.kill()
+                self.process.join(5)
+        self.process = self.conn = None
+
+    def close(self) -> None:
+        with self.lock:
+            if self.conn is not None:
+                with contextlib.suppress(OSError):
+                    self.conn.send(None)  # ends its loop
+            self._stop()
 
 
 def shared_database(url) -> bool:
@@ -166,10 +198,26 @@ _view_caches: dict[str, StudyViewCache] = {}  # in a lane: one StudyViewCache (f
 _max_kept_studies = 64
 
 
-def _start_view_child(server_pid: int, max_kept_studies: int) -> None:
+def _lane_main(conn, server_pid: int, max_kept_studies: int) -> None:
+    """A lane's process: builds asked over ``conn`` until it reads None or the server is gone."""
     global _max_kept_studies
     _max_kept_studies = max_kept_studies
     _watch_server(server_pid)
+    while True:
+        try:
+            asked = conn.recv()
+        except EOFError:
+            return
+        if asked is None:
+            return
+        try:
+            answer = (True, _build_view(*asked))
+        except Exception as exc:  # the caller raises it
+            answer = (False, exc)
+        try:
+            conn.send(answer)
+        except Exception as exc:  # an error that does not pickle
+            conn.send((False, RuntimeError(f"{type(exc).__name__}: {exc}")))
 
 
 def _build_view(fn: Callable[..., bytes], url: str, study_id: str, args: tuple) -> bytes:
