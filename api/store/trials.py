@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from datetime import timedelta
 
 import sqlalchemy as sa
 from sqlalchemy.orm import undefer
@@ -128,6 +129,10 @@ class TrialStore(StoreBase):
         }
         if outcome.worker is not None:
             values["worker"] = outcome.worker
+        # A run shorter than the driver's poll is never seen running: its start is then its end
+        # less the run's own wall time, so every finished trial has one.
+        started = now - timedelta(seconds=result.wall_time_s)
+        values["started_at"] = sa.func.coalesce(TrialRow.started_at, started)
         with self.session() as s:
             study = s.scalar(sa.select(TrialRow.study_id).where(TrialRow.id == outcome.trial_id))
             values["change_number"] = self._change_numbers(s, [study]).get(study, 0) if study else 0
