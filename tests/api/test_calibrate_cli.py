@@ -47,10 +47,10 @@ seeds = 0
 """
 
 
-# Vibration of the studies stopped after their first result: long enough that a trial takes
-# about a second with the engine as fast as it is (at 1.0 s the six trials of a study finished
-# inside one 0.5 s poll, before the signal).
-SLOW_VIBRATION_S = 10.0
+# Vibration of the studies stopped after their first result: long enough that the signal comes
+# while trials remain, with the engine as fast as it is (at 1 s, and once at 10 s in a fresh
+# clone with a second study computing alongside, the six trials finished before the signal).
+SLOW_VIBRATION_S = 60.0
 
 
 def write_study(folder: Path, population=2, vibration_time=TINY_SCENARIO["stages"]["vibration_time"]) -> Path:
@@ -97,7 +97,7 @@ def wait_for_a_result(folder: Path, limit_s: float = 240.0) -> bool:
     end = time.monotonic() + limit_s
     seen_running = False
     while time.monotonic() < end:
-        time.sleep(0.5)
+        time.sleep(0.1)
         if not (folder / "demcal.db").exists():
             continue
         try:
