@@ -173,6 +173,9 @@ def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
     # SIGTERM stops the run like Ctrl-C: the study is paused and the lease released, so no other
     # process silently takes over a study its user stopped.
     signal.signal(signal.SIGTERM, _interrupt)
+    # Ctrl-C, or `kill -INT` of a run started in the background: a shell without job control
+    # starts background commands with SIGINT ignored, and Python then keeps ignoring it.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with _LiveProgress(console, executor) as live:
             final = driver.run_to_completion(study_id, on_progress=on_progress)
