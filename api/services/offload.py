@@ -142,23 +142,27 @@ class _Lane:
 
     def call(self, view: str, fn: Callable[..., bytes], url: str, study_id: str, args: tuple) -> bytes:
         with self.lock:
-            for attempt in (1, 2):
-                if self.process is None or not self.process.is_alive():
-                    self._start()
-                try:
-                    self.conn.send((fn, url, study_id, args))
-                    ok, value = self.conn.recv()
-                except (EOFError, OSError):
-                    log.warning("a view-building process died (%s of study %s); starting another",
-                                view, study_id)
-                    self._stop()
-                    if attempt == 2:
-                        raise RuntimeError(f"the view-building process died building {view}") from None
-                    continue
-                if ok:
-                    return value
-                raise value
-        raise AssertionError("unreachable")
+            ok, value = self._ask(view, (fn, url, study_id, args))
+            if ok is None:  # the process died: once more, on a new one
+                ok, value = self._ask(view, (fn, url, study_id, args))
+            if ok is None:
+                raise RuntimeError(f"the view-building process died building {view}")
+            if ok:
+                return value
+            raise value
+
+    def _ask(self, view: str, asked: tuple) -> tuple[bool | None, object]:
+        """One round trip; (None, None) if the process died, after stopping what is left of it."""
+        if self.process is None or not self.process.is_alive():
+            self._start()
+        try:
+            self.conn.send(asked)
+            return self.conn.recv()
+        except (EOFError, OSError):
+            log.warning("a view-building process died (%s of study %s); starting another",
+                        view, asked[2])
+            self._stop()
+            return None, None
 
     def _start(self) -> None:
         context = get_context("spawn")
@@ -194,14 +198,25 @@ def shared_database(url) -> bool:
     return not (url.get_backend_name() == "sqlite" and url.database in (None, "", ":memory:"))
 
 
-_view_caches: dict[str, StudyViewCache] = {}  # in a lane: one StudyViewCache (for ``kept``) per database
-_max_kept_studies = 64
+class _LaneBuilder:
+    """What a lane's process keeps between builds: one store and one view cache (for ``kept``)
+    per database."""
+
+    def __init__(self, max_kept_studies: int) -> None:
+        self.max_kept_studies = max_kept_studies
+        self.stores: dict[str, SqlStore] = {}
+        self.caches: dict[str, StudyViewCache] = {}
+
+    def build(self, fn: Callable[..., bytes], url: str, study_id: str, args: tuple) -> bytes:
+        if url not in self.stores:
+            self.stores[url] = SqlStore(create_db_engine(url))
+            self.caches[url] = StudyViewCache(max_kept_studies=self.max_kept_studies)
+        return fn(self.stores[url], self.caches[url], study_id, *args)
 
 
 def _lane_main(conn, server_pid: int, max_kept_studies: int) -> None:
     """A lane's process: builds asked over ``conn`` until it reads None or the server is gone."""
-    global _max_kept_studies
-    _max_kept_studies = max_kept_studies
+    builder = _LaneBuilder(max_kept_studies)
     _watch_server(server_pid)
     while True:
         try:
@@ -211,18 +226,10 @@ def _lane_main(conn, server_pid: int, max_kept_studies: int) -> None:
         if asked is None:
             return
         try:
-            answer = (True, _build_view(*asked))
+            answer = (True, builder.build(*asked))
         except Exception as exc:  # the caller raises it
             answer = (False, exc)
         try:
             conn.send(answer)
         except Exception as exc:  # an error that does not pickle
             conn.send((False, RuntimeError(f"{type(exc).__name__}: {exc}")))
-
-
-def _build_view(fn: Callable[..., bytes], url: str, study_id: str, args: tuple) -> bytes:
-    if url not in _stores:
-        _stores[url] = SqlStore(create_db_engine(url))
-    if url not in _view_caches:
-        _view_caches[url] = StudyViewCache(max_kept_studies=_max_kept_studies)
-    return fn(_stores[url], _view_caches[url], study_id, *args)
