@@ -9,12 +9,28 @@ run loop in ``dem/loop.py`` calls kernels of ``dem/integrate.py``, ``dem/neighbo
 ``dem/crown.py``, ``dem/convex.py``, ``dem/motion.py``, ``dem/quaternion.py``):
 after editing one of those in a working copy, delete ``dem/__pycache__/*.nb[ic]`` (installed
 releases change every file at once, so they are safe).
-This module must not import anything heavier than the standard library.
+This module imports nothing of the engine (every kernel module imports it), and of numba only
+what says which options this release takes.
 """
 
 from __future__ import annotations
 
-JIT_FLAGS = dict(cache=True, fastmath=False, error_model="numpy", boundscheck=False, _nrt=True)
+
+def _numba_takes_nrt() -> bool:
+    """Whether this numba takes the private ``_nrt`` option (0.59-0.68 do; tested on 0.68.1). A
+    release without it compiles every kernel with its runtime: the same results, a slower step,
+    and ``tests/dem/test_reference_counts.py`` fails to say so."""
+    from numba.core.cpu import CPUTargetOptions
+    from numba.core.options import TargetOptions
+
+    return isinstance(getattr(CPUTargetOptions, "_nrt", None), TargetOptions.Mapping)
+
+
+_RUNTIME_OPTION = _numba_takes_nrt()
+
+JIT_FLAGS = dict(cache=True, fastmath=False, error_model="numpy", boundscheck=False)
+if _RUNTIME_OPTION:
+    JIT_FLAGS["_nrt"] = True
 
 # The step loop (``dem.loop._steps``), ``compute_forces`` and ``evaluate_into`` are compiled
 # without numba's runtime (``_nrt=False``): no atomic reference count up and down for each array
@@ -25,4 +41,4 @@ JIT_FLAGS = dict(cache=True, fastmath=False, error_model="numpy", boundscheck=Fa
 # call balances its own counts (which is why ``JIT_FLAGS`` sets ``_nrt=True`` explicitly: a callee
 # compiled for a caller inherits the caller's setting unless it sets its own). The results are
 # the same to the bit.
-STEP_FLAGS = dict(JIT_FLAGS, _nrt=False)
+STEP_FLAGS = dict(JIT_FLAGS, _nrt=False) if _RUNTIME_OPTION else dict(JIT_FLAGS)

@@ -70,3 +70,31 @@ def test_step_loop_keeps_reference_counts() -> None:
     assert len(kept) > 40
     now = {k: sys.getrefcount(before[k]) for k in kept}  # measured as ``counts`` was
     assert {k: (counts[k], now[k]) for k in kept if now[k] != counts[k]} == {}
+
+
+def test_the_step_flags_turn_the_runtime_off_where_numba_takes_the_option():
+    from dem import conf
+
+    assert conf.STEP_FLAGS["_nrt"] is False and conf.JIT_FLAGS["_nrt"] is True
+
+
+def test_a_numba_without_the_private_runtime_option_compiles_the_step_with_its_runtime(monkeypatch):
+    """``_nrt`` is private: a numba release that drops it must still compile the engine (slower,
+    the same results), not fail with numba's "Unrecognized options"."""
+    import importlib
+
+    import numba
+    from numba.core.cpu import CPUTargetOptions
+
+    from dem import conf
+
+    monkeypatch.setattr(CPUTargetOptions, "_nrt", None, raising=False)  # hides the base's mapping
+    try:
+        reloaded = importlib.reload(conf)
+        assert "_nrt" not in reloaded.STEP_FLAGS and "_nrt" not in reloaded.JIT_FLAGS
+        flags = dict(reloaded.STEP_FLAGS, cache=False)
+        total = numba.njit(**flags)(lambda values: values.sum())
+        assert total(np.arange(4.0)) == 6.0
+    finally:
+        monkeypatch.undo()
+        importlib.reload(conf)
