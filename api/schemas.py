@@ -159,8 +159,9 @@ class StudyRead(_Wire):
     best: TrialRead | None = Field(None, description="Lowest f1 so far, fastest among equals.")
     recommendation: dict[str, Any] | None = Field(
         None,
-        description="The fastest validated set, its 'validation_status' (validated, not "
-        "reproduced, not validated) and, after the validation, the 'validation' table.",
+        description="The fastest validated set, its 'validation_status' (pending while the search "
+        "runs, then validated or not reproduced; not validated without validation seeds) and, after "
+        "the validation, the 'validation' table.",
     )
     warnings: list[str] = Field(
         default_factory=list, description="What to know before trusting the study (bounds in the "

@@ -76,7 +76,7 @@ from optimizer.replicates import allocate
 from optimizer.seeds import trial_seed, validation_seeds
 from optimizer.space import ParameterSpace
 from optimizer.study import VALIDATION_REPLICATE_BASE, StudyDefinition, describe_validation_error
-from optimizer.validation import NOT_VALIDATED
+from optimizer.validation import NOT_VALIDATED, PENDING
 
 logger = logging.getLogger(__name__)
 
@@ -589,7 +589,7 @@ def recommend(
         ranking, definition.experiment.target(), definition.match_tolerance(), definition.objective_time
     )
     if recommendation is not None:
-        recommendation["validation_status"] = NOT_VALIDATED
+        recommendation["validation_status"] = PENDING if definition.validation.seeds else NOT_VALIDATED
     return ranking, recommendation, _verdict(ranking)
 
 

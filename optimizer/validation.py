@@ -33,7 +33,8 @@ loosens it again; with the quick study's experiment (median 5, up to 10) it vali
 runs of N_t 2-4, and 8 runs of which 5 emptied the tray.
 Otherwise ``not reproduced``. The recommendation becomes the fastest validated set; when none
 validates, the fastest matching set stays, labelled ``not reproduced``; a study without
-validation (``validation.seeds = 0``) labels it ``not validated``.
+validation (``validation.seeds = 0``) labels it ``not validated``. While the search runs, a
+study with validation seeds labels its current recommendation ``pending``: its check is to come.
 
 Pure arithmetic on records, like ``optimizer/objectives.py``.
 """
@@ -53,6 +54,7 @@ from optimizer.study import NOISE_FLOOR_QUANTILE, Experiment, StudyDefinition, a
 VALIDATED = "validated"
 NOT_REPRODUCED = "not reproduced"
 NOT_VALIDATED = "not validated"
+PENDING = "pending"
 
 
 def candidates(ranked_matches: Sequence[Evaluation], definition: StudyDefinition) -> list[Evaluation]:

@@ -188,6 +188,15 @@ def seed_study(
     return seeded
 
 
+def _validated_definition() -> StudyDefinition:
+    return parse_study({
+        "name": "validated-study", "scenario": {},
+        "experiment": {"measured": VALIDATED_MEASURED, "tolerance": 1},
+        "ga": {"population": 16, "offspring": 8, "generations": 4},
+        "validation": {"seeds": 6, "candidates": 3}, "objective_time": "wall",
+    })  # fmt: skip
+
+
 def seed_validated_study(store: SqlStore, owner: str = "alice") -> str:
     """A feeder study run to its end by the real driver on synthetic results
     (``optimizer.memory.synthetic_result``), validation included: on the fresh seeds, every third
@@ -195,12 +204,7 @@ def seed_validated_study(store: SqlStore, owner: str = "alice") -> str:
     beside sets that validate. Returns the study id."""
     from optimizer.memory import SyntheticExecutor, synthetic_result
 
-    definition = parse_study({
-        "name": "validated-study", "scenario": {},
-        "experiment": {"measured": VALIDATED_MEASURED, "tolerance": 1},
-        "ga": {"population": 16, "offspring": 8, "generations": 4},
-        "validation": {"seeds": 6, "candidates": 3}, "objective_time": "wall",
-    })  # fmt: skip
+    definition = _validated_definition()
 
     def respond(spec: TrialSpec) -> SimulationResult:
         result = synthetic_result(spec)
@@ -211,6 +215,19 @@ def seed_validated_study(store: SqlStore, owner: str = "alice") -> str:
 
     study_id = store.create_study(definition.model_dump(mode="json"), owner=owner)
     Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
+    return study_id
+
+
+def seed_study_awaiting_validation(store: SqlStore, owner: str = "alice") -> str:
+    """The study of ``seed_validated_study`` driven through its search and left running before
+    its validation: a recommendation the fresh seeds have not checked yet."""
+    from optimizer.memory import SyntheticExecutor
+
+    definition = _validated_definition()
+    study_id = store.create_study(definition.model_dump(mode="json"), owner=owner)
+    driver = Driver(store, SyntheticExecutor(), reconcile_every_s=0)
+    while driver.step(study_id, timeout=0).batch < definition.validation_batch():
+        pass
     return study_id
 
 

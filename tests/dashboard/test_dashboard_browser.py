@@ -17,7 +17,13 @@ from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, trial_id
 from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
-from tests.dashboard.seed import VALIDATED_MEASURED, add_finished_trials, seed_study, seed_validated_study
+from tests.dashboard.seed import (
+    VALIDATED_MEASURED,
+    add_finished_trials,
+    seed_study,
+    seed_study_awaiting_validation,
+    seed_validated_study,
+)
 
 pytestmark = pytest.mark.browser
 
@@ -597,6 +603,27 @@ def test_the_validation_table_shows_what_the_driver_stored_after_validating(page
     assert all(values in text for values, text in zip(fresh, rows, strict=True))
     assert page.errors == []
     save_screenshot(page, "dashboard-validation")
+
+
+def test_a_recommendation_before_its_validation_says_pending_and_not_validated_once_the_study_stopped(
+    page, dashboard
+):
+    study_id = seed_study_awaiting_validation(dashboard.store)
+    stored = dashboard.store.get_study(study_id)
+    assert stored.status == "running" and stored.recommendation["validation_status"] == "pending"
+
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_selector("#validation-status")
+    running = page.locator("#validation-status").inner_text()
+    dashboard.store.set_status(study_id, StudyStatus.CANCELLED)
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function("() => document.getElementById('study-status').textContent === 'cancelled'")
+    page.wait_for_selector("#validation-status")
+    cancelled = page.locator("#validation-status").inner_text()
+
+    assert running == "Validation: pending: fresh seeds when the search ends"
+    assert cancelled == "Validation: not validated"
+    assert page.errors == []
 
 
 def test_a_study_with_mu_wall_shows_it_in_its_plots_tables_and_trials_and_one_without_does_not(

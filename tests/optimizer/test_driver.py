@@ -163,6 +163,30 @@ def test_validation_reruns_the_fastest_matches_on_seeds_the_search_never_used():
     assert all(len(row["n_remaining"]) == 5 for row in rows)
 
 
+@pytest.mark.parametrize(("seeds", "during", "after"), [
+    (5, {"pending"}, {"validated", "not reproduced"}), (0, {"not validated"}, {"not validated"}),
+])
+def test_the_recommendation_is_pending_until_its_validation(seeds, during, after):
+    """A set recommended while the search runs has not been checked yet: "not validated" then
+    read as a verdict on the dashboard; it is the label of a study without validation seeds."""
+    definition = make_definition(
+        ga={"population": 8, "offspring": 4, "generations": 3}, validation={"seeds": seeds, "candidates": 2}
+    )
+    store = MemoryStore()
+    study_id = start(store, definition)
+    driver = Driver(store, SyntheticExecutor(per_poll=2), reconcile_every_s=0)
+
+    seen = set()
+    progress = driver.step(study_id, timeout=0)
+    while progress.status is StudyStatus.RUNNING:
+        if progress.recommendation and progress.batch < definition.validation_batch():
+            seen.add(progress.recommendation["validation_status"])
+        progress = driver.step(study_id, timeout=0)
+
+    assert seen == during
+    assert progress.recommendation["validation_status"] in after
+
+
 def test_common_random_numbers_replicate_r_has_one_seed_across_individuals():
     definition = make_definition(
         ga={"population": 6, "offspring": 3, "generations": 2}, replicates=3, validation={"seeds": 0}

@@ -178,7 +178,8 @@ function headerHtml(th, suffix, prefix = "") {
 }
 
 const interval = (pair, digits = 2) => (pair ? `[${fmt(pair[0], digits)}–${fmt(pair[1], digits)}]` : "");
-const VALIDATION_CLASS = { validated: "ok", "not reproduced": "failed", "not validated": "paused" };
+const VALIDATION_CLASS = { validated: "ok", "not reproduced": "failed", "not validated": "paused", pending: "pending" };
+const VALIDATION_TEXT = { pending: "pending: fresh seeds when the search ends" };
 // What the recommendation is, by its validation status (optimizer/validation.py); a set not
 // validated (validation.seeds = 0, or the search still running) is introduced as a search's match.
 const INTRO = {
@@ -222,13 +223,15 @@ function renderRecommendation(body) {
     }
     const trialId = (rec.trial_ids || [])[0]; // optimizer.pareto.summary: every replicate of the set
     const dl = el("dl", { class: "facts" }, ...rows.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
-    const verdict = rec.validation_status;
+    // A study stopped before its validation keeps the search's "pending": it will not come.
+    const verdict = rec.validation_status === "pending" && TERMINAL.has(study.status)
+      ? "not validated" : rec.validation_status;
     box.replaceChildren(
       el("p", { text: INTRO[verdict] || (responses.length === 1
         ? `The fastest Pareto member whose ${responseText(responses[0])} matches the experiment within tolerance:`
         : "The fastest Pareto member whose responses match every experiment within tolerance:") }),
       verdict ? el("p", { id: "validation-status" }, "Validation: ",
-        el("span", { class: `status ${VALIDATION_CLASS[verdict] || ""}`, text: verdict })) : null,
+        el("span", { class: `status ${VALIDATION_CLASS[verdict] || ""}`, text: VALIDATION_TEXT[verdict] || verdict })) : null,
       dl,
       trialId ? el("p", {}, el("a", { href: `/trials/${encodeURIComponent(trialId)}`, text: `open trial ${trialId}` })) : null,
     );
