@@ -179,7 +179,10 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
     live, live_spheres = live_rows(bodies.active, spheres.body)
     rows = [
         ("compute_forces", lambda: compute_forces(bodies, spheres, mat, walls, lists, grav, lim, 0.0)),
-        ("  sphere/piece pairs", lambda: _sphere_pair_forces(bodies, spheres, lists.pairs, lim, 0.0)),
+        (
+            "  sphere/piece pairs",
+            lambda: _sphere_pair_forces(bodies, spheres, lists.pairs, lists.grid.moved2, lim, 0.0),
+        ),
         (
             "  sphere/piece-facet pairs",
             lambda: _wall_forces(bodies, spheres, mat, walls, lists.wall_pairs, lim, 0.0),
@@ -207,7 +210,7 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
         (
             "update_spheres + omega",
             lambda: (
-                update_spheres(spheres, bodies, live_spheres, lists.grid.x_build),
+                update_spheres(spheres, bodies, live_spheres, lists.grid),
                 update_omega(bodies, live),
             ),
         ),

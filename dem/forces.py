@@ -49,7 +49,7 @@ from dem.contact import (
 from dem.convex import at_point, place_body
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
-from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS
+from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_GROUPS, N_PAIRS
 from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry
 
 
@@ -183,7 +183,8 @@ def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_lim
         for k in range(3):
             force[b, k] = mass[b] * gravity[k]
             torque[b, k] = 0.0
-    n_pairs, bad = _sphere_pair_forces(bodies, spheres, lists.pairs, overlap_limit, hist_dt)
+    moved2 = lists.grid.moved2
+    n_pairs, bad = _sphere_pair_forces(bodies, spheres, lists.pairs, moved2, overlap_limit, hist_dt)
     if bad >= 0:
         return n_pairs, bad
     n_walls, bad = _wall_forces(bodies, spheres, material, walls, lists.wall_pairs, overlap_limit, hist_dt)
@@ -191,13 +192,17 @@ def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_lim
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
+def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
     """Sphere-sphere contacts. Returns (contacts carrying force, offending body or -1).
 
-    A scan of the whole list, without branches, first lists the pairs that need work (touching,
-    or holding a spring to clear) in ``pairs.touch``: about half of a settled packing's listed
-    pairs touch, and deciding that inside the force loop cost a mispredicted jump a pair (10,140
-    settling spheres: 883 -> 732 us a pass). A body pair with one listed sphere pair (two plain
+    A scan without branches first lists the pairs that need work (touching, or holding a spring
+    to clear) in ``pairs.touch``: about half of a settled packing's listed pairs touch, and
+    deciding that inside the force loop cost a mispredicted jump a pair (10,140 settling spheres:
+    883 -> 732 us a pass). The scan visits only the pairs whose gap at the build the moves of
+    their bodies' spheres since then (``moved2``, from ``dem.integrate.update_spheres``) could
+    have closed: |x_i - x_j| >= d_build - |dx_i| - |dx_j|. In the shaken feeder about 2 % of the
+    listed pairs touch and about 30 % are visited (``benchmarks/README.md``, engine speed
+    session 10). A body pair with one listed sphere pair (two plain
     spheres: every pair of a sphere packing) carries its whole law, so its force is applied in the
     first pass over those. The others need their group's sums first: the first pass keeps their
     geometry and adds their ``share_sums`` (and count) to the group's, the second applies their
@@ -229,20 +234,39 @@ def _sphere_pair_forces(bodies, spheres, pairs, lim, hist_dt):
     n_pp = pairs.count[N_PAIRS]
     # The pairs that need work: touching, or holding a spring to clear. Branch-free, so that a
     # packing's half-touching pairs cost no mispredicted jumps here.
-    touch = pairs.touch
+    # A pair farther apart at the build than its bodies' spheres have moved since (``moved2``)
+    # neither touches nor holds a spring, and its overlap is still the -1 of the build: a group's
+    # pairs are visited by their gap then (``by_gap``, ``gap``) only while a move could have closed
+    # it, and the ones that need work put back in list order. The moves only grow until the next
+    # build, so a pair once visited is visited at every step until then.
+    touch, group_start, by_gap, gap = pairs.touch, pairs.group_start, pairs.by_gap, pairs.gap
     n_touch = 0
-    for p in range(n_pp):
-        i, j = pp_i[p], pp_j[p]
-        dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
-        rs = radius[i] + radius[j]
-        pp_delta[p] = -1.0
-        touch[n_touch] = p
-        n_touch += (
-            (dx * dx + dy * dy + dz * dz < rs * rs)
-            | (pp_hist[p, 0] != 0.0)
-            | (pp_hist[p, 1] != 0.0)
-            | (pp_hist[p, 2] != 0.0)
-        )
+    for g in range(pairs.count[N_GROUPS]):
+        p_first, p_end = group_start[g], group_start[g + 1]
+        moved = math.sqrt(moved2[sbody[pp_i[p_first]]]) + math.sqrt(moved2[sbody[pp_j[p_first]]])
+        t_first = n_touch
+        for k in range(p_first, p_end):
+            if gap[k] > moved:
+                break
+            p = by_gap[k]
+            i, j = pp_i[p], pp_j[p]
+            dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+            rs = radius[i] + radius[j]
+            pp_delta[p] = -1.0
+            touch[n_touch] = p
+            n_touch += (
+                (dx * dx + dy * dy + dz * dz < rs * rs)
+                | (pp_hist[p, 0] != 0.0)
+                | (pp_hist[p, 1] != 0.0)
+                | (pp_hist[p, 2] != 0.0)
+            )
+        for t_at in range(t_first + 1, n_touch):  # insertion sort: a few pairs a group
+            p_at = touch[t_at]
+            t_to = t_at - 1
+            while t_to >= t_first and touch[t_to] > p_at:
+                touch[t_to + 1] = touch[t_to]
+                t_to -= 1
+            touch[t_to + 1] = p_at
     zeroed = -1
     for t in range(n_touch):
         p = touch[t]

@@ -73,20 +73,33 @@ def drift(bodies, live, lb, dt):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def update_spheres(spheres, bodies, live_spheres, x_build):
-    """World positions of the spheres; returns the largest squared move since ``x_build`` (the
-    positions at the last list build)."""
+def update_spheres(spheres, bodies, live_spheres, grid):
+    """World positions of the spheres; returns the largest squared move since ``grid.x_build``
+    (the positions at the last list build) and keeps each body's largest since then in
+    ``grid.moved2`` (what lets the force passes skip pairs that cannot have closed their gap)."""
     x, offset, sbody = spheres.x, spheres.offset, spheres.body
     pos, rot = bodies.pos, bodies.rot
+    x_build, moved2 = grid.x_build, grid.moved2
     worst = 0.0
+    # A body's spheres are consecutive rows: its pose is read once for all of them.
+    b_at = -1
+    px = py = pz = r00 = r01 = r02 = r10 = r11 = r12 = r20 = r21 = r22 = 0.0
     for s in live_spheres:
         b = sbody[s]
+        if b != b_at:
+            b_at = b
+            px, py, pz = pos[b, 0], pos[b, 1], pos[b, 2]
+            r00, r01, r02 = rot[b, 0, 0], rot[b, 0, 1], rot[b, 0, 2]
+            r10, r11, r12 = rot[b, 1, 0], rot[b, 1, 1], rot[b, 1, 2]
+            r20, r21, r22 = rot[b, 2, 0], rot[b, 2, 1], rot[b, 2, 2]
         ox, oy, oz = offset[s, 0], offset[s, 1], offset[s, 2]
-        r = rot[b]
-        x[s, 0] = pos[b, 0] + r[0, 0] * ox + r[0, 1] * oy + r[0, 2] * oz
-        x[s, 1] = pos[b, 1] + r[1, 0] * ox + r[1, 1] * oy + r[1, 2] * oz
-        x[s, 2] = pos[b, 2] + r[2, 0] * ox + r[2, 1] * oy + r[2, 2] * oz
-        d2 = (x[s, 0] - x_build[s, 0]) ** 2 + (x[s, 1] - x_build[s, 1]) ** 2 + (x[s, 2] - x_build[s, 2]) ** 2
+        xs = px + r00 * ox + r01 * oy + r02 * oz
+        ys = py + r10 * ox + r11 * oy + r12 * oz
+        zs = pz + r20 * ox + r21 * oy + r22 * oz
+        x[s, 0], x[s, 1], x[s, 2] = xs, ys, zs
+        d2 = (xs - x_build[s, 0]) ** 2 + (ys - x_build[s, 1]) ** 2 + (zs - x_build[s, 2]) ** 2
+        if d2 > moved2[b]:
+            moved2[b] = d2
         if d2 > worst:
             worst = d2
     return worst

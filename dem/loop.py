@@ -115,7 +115,7 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
     force_rebuild = need_forces or resume
     if need_forces and not resume:
         _move_walls(walls, clk[K_T])
-        update_spheres(spheres, bodies, live_spheres, lists.grid.x_build)
+        update_spheres(spheres, bodies, live_spheres, lists.grid)
         update_omega(bodies, live)
         if not _rebuild(lists, spheres, bodies, walls, settings, cnt):
             cnt[C_MIDSTEP] = 0
@@ -172,7 +172,7 @@ def _steps(
             drift(bodies, live, lb, dt)
             clk[K_T] += dt
             _move_walls(walls, clk[K_T])
-            sphere_move2 = update_spheres(spheres, bodies, live_spheres, lists.grid.x_build)
+            sphere_move2 = update_spheres(spheres, bodies, live_spheres, lists.grid)
             update_omega(bodies, live)
             sphere_move = math.sqrt(sphere_move2)
             if 2.0 * sphere_move > skin:

@@ -10,6 +10,9 @@ rebuild. Sphere pairs are ordered by (body a, body b, sphere i, sphere j), so ea
 sphere contacts are contiguous (a *group*: the resolution rule of ``dem/contact.py`` shares the
 pair's stiffness among them); sphere-facet pairs by (sphere, facet). Tangential history lives in
 an array parallel to each list and is carried across rebuilds by merging the two sorted lists.
+Each build also orders every group's pairs by their gap then (``by_gap``, ``gap``) and restarts
+the bodies' largest sphere moves (``Grid.moved2``): a pair whose gap exceeds its two bodies' moves
+since cannot touch, and the force pass does not visit it (``dem/forces.py``).
 
 The containers (``Grid``, ``SpherePairs``, ``WallPairs``, bundled as ``Neighbours``) are built
 and grown here, in Python, between kernel calls; the kernels never allocate. A list that lacks
@@ -52,6 +55,7 @@ class Grid(NamedTuple):
     sphere_cell: np.ndarray  # (n_spheres,) int64 each sphere's cell, -1 when its body is inactive
     candidates: np.ndarray  # (n_spheres,) int64 scratch: one sphere's partners while sorting them
     x_build: np.ndarray  # (n_spheres, 3) sphere centres at the last build (the skin criterion)
+    moved2: np.ndarray  # (n_bodies,) largest squared move of any of a body's spheres since the last build
 
 
 class SpherePairs(NamedTuple):
@@ -74,6 +78,11 @@ class SpherePairs(NamedTuple):
     moment: np.ndarray  # (capacity, 3) scratch of the force pass: its patch's second moments
     simplex: np.ndarray  # (capacity, SIMPLEX) int32 rounded pieces: last GJK simplex (any is valid)
     touch: np.ndarray  # (capacity,) int32 scratch of the force pass: the pairs it works on, in order
+    group_start: np.ndarray  # (capacity + 1,) int32 first pair of each group (a group's pairs are contiguous)
+    by_gap: (
+        np.ndarray
+    )  # (capacity,) int32 each group's pairs by their gap at the build (``_sphere_pair_gaps``)
+    gap: np.ndarray  # (capacity,) those gaps, in that order
 
 
 class WallPairs(NamedTuple):
@@ -106,14 +115,14 @@ class Neighbours(NamedTuple):
 def empty_neighbours() -> Neighbours:
     """Lists for no spheres, with the minimum capacity."""
     return Neighbours(
-        sized_grid(None, 0), _sphere_pairs(_MIN_CAPACITY, None), _wall_pairs(_MIN_CAPACITY, None)
+        sized_grid(None, 0, 0), _sphere_pairs(_MIN_CAPACITY, None), _wall_pairs(_MIN_CAPACITY, None)
     )
 
 
-def sized_grid(grid: Grid | None, n_spheres: int) -> Grid:
-    """A grid for ``n_spheres`` (the same one if it fits), keeping the build positions of the
-    spheres it had."""
-    if grid is not None and len(grid.x_build) == n_spheres:
+def sized_grid(grid: Grid | None, n_spheres: int, n_bodies: int) -> Grid:
+    """A grid for ``n_spheres`` of ``n_bodies`` (the same one if it fits), keeping the build
+    positions of the spheres it had."""
+    if grid is not None and len(grid.x_build) == n_spheres and len(grid.moved2) == n_bodies:
         return grid
     # At most this many cells (a few per sphere keeps the empty-cell overhead small); the kernel
     # enlarges the cells when the spheres' bounding box needs more.
@@ -130,6 +139,7 @@ def sized_grid(grid: Grid | None, n_spheres: int) -> Grid:
         np.zeros(n_spheres, dtype=np.int64),
         np.zeros(n_spheres, dtype=np.int64),
         x_build,
+        np.zeros(n_bodies),
     )
 
 
@@ -177,6 +187,9 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
         np.zeros((capacity, 3)),
         np.zeros((capacity, SIMPLEX), dtype=_INDEX),
         np.zeros(capacity, dtype=_INDEX),
+        np.zeros(capacity + 1, dtype=_INDEX),
+        np.zeros(capacity, dtype=_INDEX),
+        np.zeros(capacity),
     )
 
 
@@ -221,10 +234,13 @@ def rebuild_lists(lists, spheres, active, walls, skin, cell_min):
         return False
     _adopt_sphere_pairs(pairs, spheres.body, active.shape[0], n_pp)
     _adopt_wall_pairs(wall_pairs, n_wp)
-    x, x_build = spheres.x, grid.x_build
+    _sphere_pair_gaps(pairs, spheres)
+    x, x_build, moved2 = spheres.x, grid.x_build, grid.moved2
     for s in range(x.shape[0]):
         for k in range(3):
             x_build[s, k] = x[s, k]
+    for b in range(moved2.shape[0]):
+        moved2[b] = 0.0
     return True
 
 
@@ -462,3 +478,38 @@ def _adopt_wall_pairs(wall_pairs, n_wp):
         for k in range(3):
             wp_hist[p, k] = new_whist[p, k]
     wall_pairs.count[N_PAIRS] = n_wp
+
+
+# A gap is lowered by this fraction of the radii it is measured against, far more than the
+# rounding of the distances on either side of the test, so a skipped pair never touches.
+_GAP_ROUNDING = 1e-8
+
+
+@numba.njit(**JIT_FLAGS)
+def _sphere_pair_gaps(pairs, spheres):
+    """Each group's first pair, and its pairs ordered by their gap |x_i - x_j| - r_i - r_j at the
+    build (-inf for a pair holding a spring), with every pair's overlap reset to -1 (apart): the
+    force pass visits a group's pairs only as far as its bodies' moves since the build could have
+    closed a gap (``dem/forces.py``)."""
+    pp_i, pp_j, pp_hist, pp_group = pairs.i, pairs.j, pairs.hist, pairs.group
+    group_start, by_gap, gap = pairs.group_start, pairs.by_gap, pairs.gap
+    x, radius = spheres.x, spheres.radius
+    n_pp = pairs.count[N_PAIRS]
+    gaps = np.empty(n_pp)
+    for p in range(n_pp):
+        pairs.delta[p] = -1.0
+        if p == 0 or pp_group[p] != pp_group[p - 1]:
+            group_start[pp_group[p]] = p
+        i, j = pp_i[p], pp_j[p]
+        rs = radius[i] + radius[j]
+        d = np.sqrt((x[i, 0] - x[j, 0]) ** 2 + (x[i, 1] - x[j, 1]) ** 2 + (x[i, 2] - x[j, 2]) ** 2)
+        gaps[p] = d - rs - _GAP_ROUNDING * rs
+        if pp_hist[p, 0] != 0.0 or pp_hist[p, 1] != 0.0 or pp_hist[p, 2] != 0.0:
+            gaps[p] = -np.inf
+    group_start[pairs.count[N_GROUPS]] = n_pp
+    # By gap, then (stably) by group: each group's range holds its pairs by gap.
+    order = np.argsort(gaps, kind="mergesort")
+    order = order[np.argsort(pp_group[:n_pp][order], kind="mergesort")]
+    for k in range(n_pp):
+        by_gap[k] = order[k]
+        gap[k] = gaps[order[k]]
