@@ -56,6 +56,7 @@ class Grid(NamedTuple):
     candidates: np.ndarray  # (n_spheres,) int64 scratch: one sphere's partners while sorting them
     x_build: np.ndarray  # (n_spheres, 3) sphere centres at the last build (the skin criterion)
     moved2: np.ndarray  # (n_bodies,) largest squared move of any of a body's spheres since the last build
+    moved: np.ndarray  # (n_bodies,) its square root, refreshed by the force pass at each step
 
 
 class SpherePairs(NamedTuple):
@@ -139,6 +140,7 @@ def sized_grid(grid: Grid | None, n_spheres: int, n_bodies: int) -> Grid:
         np.zeros(n_spheres, dtype=np.int64),
         np.zeros(n_spheres, dtype=np.int64),
         x_build,
+        np.zeros(n_bodies),
         np.zeros(n_bodies),
     )
 
