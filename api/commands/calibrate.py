@@ -30,6 +30,7 @@ from pathlib import Path
 
 import typer
 
+from api.commands.console import cli_console
 from dem.parameters import item_parameter
 
 logger = logging.getLogger(__name__)
@@ -146,7 +147,6 @@ def _resume(store, study_id: str, leases) -> str:
 
 
 def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
-    from rich.console import Console
 
     from api.driver_loop import RunningMarks
     from api.settings import get_settings
@@ -154,7 +154,7 @@ def _run(store, study_id: str, workers: int, results: Path, leases) -> None:
     from optimizer.protocols import StudyStatus
     from worker.local import LocalPoolExecutor
 
-    console = Console()
+    console = cli_console()
     settings = get_settings()
     executor = LocalPoolExecutor(workers, snapshot_root=settings.snapshot_root, nice=settings.worker_nice)
     driver = Driver(store, executor)

@@ -6,6 +6,7 @@ import json
 
 import typer
 
+from api.commands.console import cli_console
 from api.settings import Settings, get_settings
 
 
@@ -18,10 +19,9 @@ def register(app: typer.Typer) -> None:
         if as_json:
             typer.echo(json.dumps(values, indent=2))
             return
-        from rich.console import Console
         from rich.table import Table
 
         table = Table("variable", "value", "meaning")
         for name, field in Settings.model_fields.items():
             table.add_row(f"DEMCAL_{name.upper()}", str(values[name]), field.description or "")
-        Console().print(table)
+        cli_console().print(table)

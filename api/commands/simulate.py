@@ -15,6 +15,7 @@ from pathlib import Path
 
 import typer
 
+from api.commands.console import cli_console
 from dem.parameters import ALL_PARAMETER_NAMES, range_problem
 
 
@@ -135,7 +136,6 @@ def register(app: typer.Typer) -> None:
 
 
 def _run_with_progress(scenario, config, engine, params, seed, deadline, snapshots, vtk, quiet):
-    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dem.engines.base import run_scenario
@@ -149,7 +149,7 @@ def _run_with_progress(scenario, config, engine, params, seed, deadline, snapsho
         TextColumn("{task.fields[count]} " + scenario.progress_label),
         TimeElapsedColumn(),
     )
-    console = Console(stderr=True)
+    console = cli_console(stderr=True)
     with Progress(*columns, console=console, disable=quiet, transient=False) as bar:
         task = bar.add_task("run", total=end, count="?")
 
@@ -161,7 +161,6 @@ def _run_with_progress(scenario, config, engine, params, seed, deadline, snapsho
 
 
 def _print_summary(scenario, result) -> None:
-    from rich.console import Console
     from rich.table import Table
 
     table = Table("quantity", "value", title=f"{scenario.kind} run ({result.engine}): {result.status.value}")
@@ -186,4 +185,4 @@ def _print_summary(scenario, result) -> None:
     table.add_row("seed / version", f"{result.seed} / {result.version}")
     if result.message:
         table.add_row("message", result.message)
-    Console().print(table)
+    cli_console().print(table)

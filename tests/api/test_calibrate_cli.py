@@ -312,3 +312,31 @@ def test_a_bad_scenario_in_a_study_file_exits_2_naming_the_field_of_its_kind(emb
 
     assert result.exit_code == 2
     assert "scenario.cylinder.height: Input should be greater than 0" in result.output
+
+
+def test_a_validation_table_written_to_a_log_keeps_its_verdicts_whole(monkeypatch, capsys):
+    """Piped or logged, rich drew 80 columns and the paper study's table read 'vali…'."""
+    from api.commands.calibrate import _validation_table
+    from api.commands.console import cli_console
+
+    monkeypatch.delenv("COLUMNS", raising=False)
+    row = {
+        "params": {"E": 9.67e6, "nu": 0.363, "e": 0.175, "mu": 0.914}, "search_f1": 0.0,
+        "n_remaining": [0, 0, 10, 4, 9, 3, 1, 15, 16, 3], "failures": [], "median": 3.5,
+        "median_interval": [1.5, 10.0], "w1": 0.8, "f1": 0.5, "f1_interval": [0.0, 6.0],
+    }  # fmt: skip
+    summary = {
+        "measured": [0, 0, 1, 2, 3, 4, 4, 12, 15, 16], "responses_measured": "N_t",
+        "validation_status": "validated",
+        "validation": [
+            dict(row, individual=77, verdict="validated"),
+            dict(row, individual=152, verdict="not reproduced", failures=["unstable"]),
+        ],
+    }  # fmt: skip
+
+    _validation_table(cli_console(), summary)
+    output = capsys.readouterr().out
+
+    assert "…" not in output
+    assert "validated" in output and "not reproduced" in output and "+1 failed" in output
+    assert "0,0,10,4,9,3,1,15,16,3" in output
