@@ -601,6 +601,14 @@ def test_the_validation_table_shows_what_the_driver_stored_after_validating(page
     assert all(f"+ {len(table[k]['failures'])} failed" in rows[k] for k in failed)
     fresh = [", ".join(str(int(v)) for v in row["n_remaining"]) for row in table]
     assert all(values in text for values, text in zip(fresh, rows, strict=True))
+    # The fresh runs are not in the Pareto plot, and the caption says why (it said "not
+    # finished yet" of a finished study's validation runs).
+    runs = sum(len(row["n_remaining"]) + len(row["failures"]) for row in table)
+    page.wait_for_function("() => document.getElementById('pareto-caption').textContent.includes('measured')")
+    caption = page.locator("#pareto-caption").inner_text()
+    assert f"{runs} fresh-seed validation runs" in caption and "not finished" not in caption, caption
+    # A fresh run that failed does not fail its set: the candidate stays a measured point.
+    assert "failed:" not in caption, caption
     assert page.errors == []
     save_screenshot(page, "dashboard-validation")
 

@@ -226,10 +226,16 @@ export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit, f1r
     hovermode: "closest",
     uirevision: xKey,
   });
+  // What is not drawn and is not a failure: runs still computing, extra replicates (the batch
+  // after the search's generations) and search runs whose batch is not ranked yet.
+  const drawn = new Set([...shown, ...failed]);
+  const left = trials.filter((t) => !drawn.has(t));
+  const unfinished = left.filter((t) => t.state !== "done").length;
+  const outside = left.filter((t) => t.state === "done" && t.generation > maxGeneration).length;
   return {
     data: [all, pareto, ...strips], layout, counts,
     measured: shown.length, failed: failed.length,
-    hidden: trials.length - shown.length - failed.length,
+    hidden: { unfinished, outside, unranked: left.length - unfinished - outside },
   };
 }
 

@@ -109,10 +109,15 @@ async function renderPlots() {
   const list = [...trials.values()];
   const xKey = document.getElementById("pareto-x").value;
   const gmax = maxGeneration();
-  const pareto = paretoFigure(list, xKey, gmax, responses, study.f1_unit, study.f1_rule);
+  // The validation's fresh runs (the batch after the extra replicates) are not the search's: the
+  // ranking leaves them out (optimizer/objectives.py), so a failed one does not fail its set here
+  // either; the validation table shows them.
+  const ranked = list.filter((t) => !study?.progress?.generations_total || t.generation <= gmax + 1);
+  const validation = list.length - ranked.length;
+  const pareto = paretoFigure(ranked, xKey, gmax, responses, study.f1_unit, study.f1_rule);
   Plotly.react("pareto-plot", pareto.data, pareto.layout, CONFIG);
   const caption = document.getElementById("pareto-caption");
-  const pending = pareto.hidden;
+  const { unfinished, outside, unranked } = pareto.hidden;
   caption.textContent =
     `${pareto.measured} measured trials, coloured by generation; ` +
     `${pareto.data[1].x.length} Pareto members are outlined diamonds. ` +
@@ -120,7 +125,10 @@ async function renderPlots() {
       ? `Above, apart: ${pareto.counts.text}; their trials (${pareto.failed}) have ${noneText()} and are not ranked. `
       : `Every finished run measured ${measuredText()}. `) +
     "Click a point to open its trial." +
-    (pending ? ` ${pending} trials not shown (not finished yet).` : "");
+    (unfinished ? ` ${unfinished} trials not shown (not finished yet).` : "") +
+    (unranked ? ` ${unranked} finished trials not shown until their batch is ranked.` : "") +
+    (outside ? ` ${outside} extra replicates not shown (not ranked yet).` : "") +
+    (validation ? ` ${validation} fresh-seed validation runs are in the validation table, not here.` : "");
   if (!performance.getEntriesByName("demcal:pareto-drawn").length) performance.mark("demcal:pareto-drawn");
   await new Promise((resolve) => requestAnimationFrame(() => setTimeout(resolve, 0)));
   // Fig. 5 and the parameters are the search's generations; extra replicates and the validation
