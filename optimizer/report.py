@@ -287,11 +287,21 @@ def write_pareto_png(
         bar = fig.colorbar(points, ax=[left_failed, left], label="generation")
         bar.locator = MaxNLocator(integer=True)  # generations are whole numbers
         bar.update_ticks()
-    real_f2 = [ev.wall_time_s if wall else ev.cost for ev in evaluations]
+    def real_f2(ev: Evaluation) -> float:
+        return ev.wall_time_s if wall else ev.cost
+
+    # The axis spans the measured sets: a run that failed early (an invalid insertion) costs
+    # 1e-4 of a full run, and on an axis reaching down to it the measured points were squeezed
+    # into a sliver. Failed runs below the span are drawn at its left edge and counted.
+    spanned = [real_f2(ev) for ev in (measured or evaluations)]
     # Log only where f2 spans a decade or more: on a narrower span matplotlib labels minor ticks,
     # which overlap into an unreadable axis.
-    if real_f2 and min(real_f2) > 0 and max(real_f2) >= 10 * min(real_f2):
+    log_axis = bool(spanned) and min(spanned) > 0 and max(spanned) >= 10 * min(spanned)
+    left_edge = None
+    if log_axis:
         left.set_xscale("log")
+        left_edge, right_edge = min(spanned) / 1.5, max(spanned) * 1.5
+        left.set_xlim(left_edge, right_edge)
     front = [member for member in summary_json["pareto"] if not member.get("failure")]
     if front:
         # The attained front is a staircase (nothing is known between members), as on the dashboard.
@@ -311,18 +321,20 @@ def write_pareto_png(
     by_status: dict[str, list[Evaluation]] = {}
     for ev in failed:
         by_status.setdefault(failure_status(ev) or "", []).append(ev)
+    below = 0
     for row, status in enumerate(statuses):
         members = by_status.get(status, [])
         marker, colour = _failure_style(status)
-        left_failed.scatter(
-            [ev.wall_time_s if wall else ev.cost for ev in members],
-            [row] * len(members),
-            marker=marker,
-            color=colour,
-            s=22,
-        )
+        xs = [real_f2(ev) for ev in members]
+        if left_edge is not None:
+            below += sum(x < left_edge for x in xs)
+            xs = [max(x, left_edge) for x in xs]
+        left_failed.scatter(xs, [row] * len(members), marker=marker, color=colour, s=22, clip_on=False)
     measured = summary_json.get("responses_measured") or "N_t"
     _failure_strip(left_failed, statuses, f"failed individuals: {len(failed)} (not ranked)", measured)
+    if below:
+        left_failed.text(0.99, 0.06, f"{below} stopped cheaper than any measured set: at the left edge",
+                         transform=left_failed.transAxes, ha="right", va="bottom", fontsize=7)
 
     by_generation: dict[int, list[int]] = {}
     failed_by_generation: dict[int, dict[str, int]] = {}

@@ -7,6 +7,7 @@ import json
 import statistics
 from collections import Counter
 
+from dem.result import SimulationStatus
 from optimizer.driver import Driver
 from optimizer.memory import MemoryStore, SyntheticExecutor, synthetic_result, synthetic_with_failures
 from optimizer.protocols import TrialRecord, TrialSpec, TrialState
@@ -147,3 +148,40 @@ def test_first_match_counts_every_earlier_extra_replicate():
     records += [_record(i, 1, r, TARGET if i == 9 else TARGET + 8) for i in range(8, 12) for r in range(2)]
 
     assert first_match(records, definition) == 16 + 1 + 2 + 2
+
+
+def test_the_pareto_axis_spans_the_measured_sets_and_cheaper_failures_sit_at_its_edge(
+    tmp_path, small_definition, monkeypatch
+):
+    """The paper study's invalid insertions cost 1e-4 of a full run; on an axis down to them the
+    measured sets were squeezed into a sliver of pareto.png."""
+    import matplotlib.figure
+
+    def respond(spec):
+        result = synthetic_result(spec)
+        if spec.params["E"] < 1e6:  # stopped during the insertion: 1e-4 of a full run
+            return result.model_copy(update={
+                "status": SimulationStatus.INVALID, "message": "overlap",
+                "wall_time_s": result.wall_time_s * 1e-4, "cost": result.cost * 1e-4,
+            })  # fmt: skip
+        return result
+
+    figures = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: figures.append(fig))
+    store = MemoryStore()
+    study_id = store.create_study(small_definition.model_dump(mode="json"))
+    Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
+    records = store.trials(study_id)
+    write_results(tmp_path, store.load_study(study_id), records)
+
+    [figure] = figures
+    strip, front = figure.axes[0], figure.axes[2]
+    x = "wall_time_s" if small_definition.objective_time == "wall" else "cost"
+    ok = [getattr(r.result, x) for r in records if r.result.ok]
+    failed = [getattr(r.result, x) for r in records if not r.result.ok]
+    low, high = front.get_xlim()
+    assert failed and max(failed) < min(ok)
+    assert min(ok) / 2 < low < min(ok) and max(ok) < high < 2 * max(ok)
+    drawn = [x for collection in strip.collections for x, _ in collection.get_offsets()]
+    assert drawn and min(drawn) == low
+    assert any("at the left edge" in text.get_text() for text in strip.texts)
