@@ -80,9 +80,7 @@ class SpherePairs(NamedTuple):
     simplex: np.ndarray  # (capacity, SIMPLEX) int32 rounded pieces: last GJK simplex (any is valid)
     touch: np.ndarray  # (capacity,) int32 scratch of the force pass: the pairs it works on, in order
     group_start: np.ndarray  # (capacity + 1,) int32 first pair of each group (a group's pairs are contiguous)
-    by_gap: (
-        np.ndarray
-    )  # (capacity,) int32 each group's pairs by their gap at the build (``_sphere_pair_gaps``)
+    by_gap: np.ndarray  # (capacity,) int32 each group's pairs by their gap at the build
     gap: np.ndarray  # (capacity,) those gaps, in that order
 
 
