@@ -45,6 +45,10 @@ class Progress(_Wire):
     failures: Failures = Field(description="Finished trials whose simulation measured no N_t.")
     generation: int
     generations_total: int
+    validation_batch: int | None = Field(
+        None, description="The batch (a trial's 'generation') of the fresh-seed validation runs, which "
+        "the search's ranking leaves out (null when the definition cannot be read)."
+    )
 
 
 class TrialRead(_Wire):

@@ -21,6 +21,7 @@ import numpy as np
 
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import (
+    FINISHED_STUDIES,
     StudyRecord,
     StudyStatus,
     TrialOutcome,
@@ -28,6 +29,7 @@ from optimizer.protocols import (
     TrialSpec,
     TrialState,
 )
+from optimizer.validation import settled
 
 
 class UnknownStudyError(KeyError):
@@ -63,8 +65,10 @@ class MemoryStore:
 
     def set_status(self, study_id: str, status: StudyStatus, message: str = "") -> None:
         with self._lock:
-            self._studies[study_id].status = status
-            self._studies[study_id].message = message
+            study = self._studies[study_id]
+            study.status, study.message = status, message
+            if status in FINISHED_STUDIES:
+                study.recommendation = settled(study.recommendation)
 
     def add_trials(self, specs: Sequence[TrialSpec]) -> None:
         with self._lock:
@@ -137,6 +141,8 @@ class MemoryStore:
             study.generation = generation
             study.ga_state = ga_state
             study.recommendation = copy.deepcopy(recommendation)
+            if study.status in FINISHED_STUDIES:
+                study.recommendation = settled(study.recommendation)
             self.generations.append((study_id, generation, list(pareto_trial_ids)))
             self.objectives.update({tid: tuple(values) for tid, values in (objectives or {}).items()})
 

@@ -36,6 +36,7 @@ class StudyStatus(StrEnum):
 
 ACTIVE_STUDIES = (StudyStatus.CREATED, StudyStatus.RUNNING)  # a driver advances these
 STOPPING_STUDIES = (StudyStatus.PAUSED, StudyStatus.CANCELLED)  # their in-flight work is withdrawn
+FINISHED_STUDIES = (StudyStatus.DONE, StudyStatus.CANCELLED, StudyStatus.FAILED)  # ended; no pending check
 IN_FLIGHT = (TrialState.QUEUED, TrialState.RUNNING)
 
 
@@ -135,7 +136,9 @@ class Store(Protocol):
 
     def load_study(self, study_id: str) -> StudyRecord: ...
 
-    def set_status(self, study_id: str, status: StudyStatus, message: str = "") -> None: ...
+    def set_status(self, study_id: str, status: StudyStatus, message: str = "") -> None:
+        """A study set to one of ``FINISHED_STUDIES`` keeps no ``pending`` validation: its
+        recommendation is stored ``optimizer.validation.settled`` (the check will not come)."""
 
     def add_trials(self, specs: Sequence[TrialSpec]) -> None:
         """Store new trials as pending; a trial id already stored is left as it is."""
@@ -167,4 +170,5 @@ class Store(Protocol):
     ) -> None:
         """Persist the GA after a generation, atomically with its Pareto ranking and the shown
         (f1, f2) of the trials whose objectives the generation changed (trial id -> values;
-        ``optimizer/outcomes.shown_objectives``). The store computes nothing itself."""
+        ``optimizer/outcomes.shown_objectives``). The store computes nothing itself, except that a
+        finished study's recommendation is stored ``settled``, as in ``set_status``."""

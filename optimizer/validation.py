@@ -34,7 +34,8 @@ runs of N_t 2-4, and 8 runs of which 5 emptied the tray.
 Otherwise ``not reproduced``. The recommendation becomes the fastest validated set; when none
 validates, the fastest matching set stays, labelled ``not reproduced``; a study without
 validation (``validation.seeds = 0``) labels it ``not validated``. While the search runs, a
-study with validation seeds labels its current recommendation ``pending``: its check is to come.
+study with validation seeds labels its current recommendation ``pending``: its check is to come;
+a study that ends before it (cancelled, failed) stores it as ``not validated`` (``settled``).
 
 Pure arithmetic on records, like ``optimizer/objectives.py``.
 """
@@ -55,6 +56,14 @@ VALIDATED = "validated"
 NOT_REPRODUCED = "not reproduced"
 NOT_VALIDATED = "not validated"
 PENDING = "pending"
+
+
+def settled(recommendation: dict | None) -> dict | None:
+    """The recommendation of a study that ended before its validation (cancelled, failed): a
+    ``pending`` check will not come, so it reads ``not validated``; any other is left as it is."""
+    if recommendation is None or recommendation.get("validation_status") != PENDING:
+        return recommendation
+    return {**recommendation, "validation_status": NOT_VALIDATED}
 
 
 def candidates(ranked_matches: Sequence[Evaluation], definition: StudyDefinition) -> list[Evaluation]:

@@ -121,6 +121,7 @@ def get_study(
             failures=failures,
             generation=latest_generation(row.generation, generations_total),
             generations_total=generations_total,
+            validation_batch=parsed.validation_batch() if parsed else None,
         ),
         best=best,
         recommendation=row.recommendation, warnings=_warnings(store, row),

@@ -13,7 +13,8 @@ from sqlalchemy.orm import undefer
 from api.errors import NotFoundError
 from api.models import StudyRow, TrialRow, UTCDateTime, encode_value, utcnow
 from api.store.base import ALL_OWNERS, KEEP_VERSION, Page, StoreBase, chunks, new_id, owner_clause
-from optimizer.protocols import StudyRecord, StudyStatus, TrialState
+from optimizer.protocols import FINISHED_STUDIES, StudyRecord, StudyStatus, TrialState
+from optimizer.validation import settled
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +138,7 @@ class StudyStore(StoreBase):
             row.status = status.value
             row.message = message
             row.started_at, row.finished_at = _study_times(row.started_at, row.finished_at, status)
+            _settle(row)
 
     def transition(
         self, study_id: str, allowed_from: Iterable[StudyStatus], to: StudyStatus, message: str = ""
@@ -149,6 +151,9 @@ class StudyStore(StoreBase):
                 .where(StudyRow.id == study_id, StudyRow.status.in_(allowed))
                 .values(status=to.value, message=message, updated_at=utcnow(), **_time_columns(to))
             ).rowcount
+            if done and to in FINISHED_STUDIES:
+                row = self._study_row(s, study_id)
+                row.recommendation = settled(row.recommendation)
             if done and to is StudyStatus.CANCELLED:
                 number = self._change_numbers(s, [study_id])[study_id]  # the study's row is locked already
                 s.execute(
@@ -188,6 +193,7 @@ class StudyStore(StoreBase):
             row.generation = generation
             row.ga_state = ga_state
             row.recommendation = recommendation
+            _settle(row)  # a driver finishing its batch after a cancel
             now = utcnow()
             s.execute(
                 sa.update(TrialRow)
@@ -212,7 +218,10 @@ class StudyStore(StoreBase):
                 s.execute(sa.update(TrialRow), updates)
 
 
-FINISHED_STUDIES = (StudyStatus.DONE, StudyStatus.CANCELLED, StudyStatus.FAILED)
+def _settle(row: StudyRow) -> None:
+    """A study that has ended keeps no ``pending`` validation (``optimizer.validation.settled``)."""
+    if row.status in {status.value for status in FINISHED_STUDIES}:
+        row.recommendation = settled(row.recommendation)
 
 
 def _study_times(

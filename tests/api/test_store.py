@@ -257,6 +257,25 @@ def test_cancelling_a_study_cancels_its_waiting_trials(store):
     assert states == [TrialState.DONE, TrialState.CANCELLED]
 
 
+@pytest.mark.parametrize("end", ["cancel", "fail", "batch saved after a cancel"])
+def test_a_study_that_ends_before_its_validation_stores_its_recommendation_not_validated(store, end):
+    study_id = store.create_study(_definition(), owner=None)
+    pending = {"individual": 3, "validation_status": "pending"}
+    store.save_generation(study_id, 0, b"ga", [], pending)
+    store.set_status(study_id, StudyStatus.RUNNING)
+    assert store.load_study(study_id).recommendation == pending  # a running search's check is to come
+
+    if end == "fail":
+        store.set_status(study_id, StudyStatus.FAILED, "worker lost")
+    else:
+        store.transition(study_id, [StudyStatus.RUNNING], StudyStatus.CANCELLED)
+    if end == "batch saved after a cancel":
+        store.save_generation(study_id, 1, b"ga", [], pending)
+
+    settled = {"individual": 3, "validation_status": "not validated"}
+    assert store.load_study(study_id).recommendation == settled
+
+
 def test_deleting_a_study_deletes_its_trials(store):
     study_id = store.create_study(_definition(), owner=None)
     store.add_trials(_specs(study_id, 2))

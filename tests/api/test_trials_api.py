@@ -163,6 +163,8 @@ def test_study_progress_counts_done_trials_and_best(client, keys, finished):
     assert body["best"]["f1"] == min(item["f1"] for item in trials)
     # Initial population + 2 generations, all recorded: generation 2 of 2, in the list too.
     assert (body["progress"]["generation"], body["progress"]["generations_total"]) == (2, 2)
+    # The fresh-seed validation comes after the extra replicates' batch (3): the dashboard reads it.
+    assert body["progress"]["validation_batch"] == 4
     listed = client.get("/api/v1/studies", headers=keys.auth()).json()["items"]
     assert [(item["generation"], item["generations_total"]) for item in listed] == [(2, 2)]
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from dem.result import SimulationResult, SimulationStatus
-from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, trial_id
+from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, TrialState, trial_id
 from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
 from tests.dashboard.seed import (
@@ -609,6 +609,18 @@ def test_the_validation_table_shows_what_the_driver_stored_after_validating(page
     assert f"{runs} fresh-seed validation runs" in caption and "not finished" not in caption, caption
     # A fresh run that failed does not fail its set: the candidate stays a measured point.
     assert "failed:" not in caption, caption
+    # The equally good sets count their runs in the search; their fresh runs are in the table above.
+    page.wait_for_selector("#equivalent tbody tr td.num")
+    validation_batch = parse_study(dashboard.store.get_study(study_id).definition).validation_batch()
+    records = dashboard.store.trials(study_id)
+    listed = [row.split("\t") for row in page.locator("#equivalent tbody tr").all_inner_texts()]
+    checked = {row["individual"] for row in table}
+    assert any(int(cells[0].split(" · i")[1]) in checked for cells in listed), listed
+    for cells in listed:
+        individual = int(cells[0].split(" · i")[1])
+        searched = [r for r in records if r.spec.individual == individual and r.state is TrialState.DONE
+                    and r.spec.generation != validation_batch]
+        assert int(cells[-2]) == len(searched), (cells, len(searched))
     assert page.errors == []
     save_screenshot(page, "dashboard-validation")
 

@@ -144,5 +144,5 @@ def test_feeder_study_keeps_its_n_t_in_items(page, dashboard):
     assert figures["generation-plot"]["axes"]["yaxis"] == "(a) measured N<sub>t</sub> (items)"
     assert figures["pareto-plot"]["axes"]["yaxis"] == "f1 = |median(N<sub>t</sub>) − 4| (items)"
     header = page.locator("#equivalent thead").inner_html()
-    assert "N<sub>t</sub> per run" in header
+    assert "N<sub>t</sub> per search run" in header
     assert page.errors == []

@@ -164,6 +164,35 @@ def test_0005_carries_n_t_over_into_named_responses(empty_url):
         engine.dispose()
 
 
+def test_0009_settles_the_pending_validation_of_studies_that_ended(empty_url):
+    # Two studies as the previous revision left them: one cancelled before its validation (its
+    # recommendation still "pending"), one searching (its check to come).
+    upgrade_database(empty_url, "0008")
+    engine = create_db_engine(empty_url)
+    study = (
+        "INSERT INTO studies (id, name, status, definition, generation, recommendation, message, extra, "
+        "created_at, updated_at) VALUES (:id, 'old', :status, '{}', 1, :rec, '', '{}', :now, :now)"
+    )
+    pending = '{"individual": 3, "validation_status": "pending"}'
+    now = "2026-11-23 10:00:00"
+    try:
+        with engine.begin() as connection:
+            for sid, status in (("cancelled", "cancelled"), ("running", "running")):
+                connection.execute(
+                    sa.text(study), {"id": sid, "status": status, "rec": pending, "now": now}
+                )
+        upgrade_database(empty_url)
+        with engine.connect() as connection:
+            stored = {
+                row.id: _json(row.recommendation)
+                for row in connection.execute(sa.text("SELECT id, recommendation FROM studies"))
+            }
+        assert stored["cancelled"] == {"individual": 3, "validation_status": "not validated"}
+        assert stored["running"] == {"individual": 3, "validation_status": "pending"}
+    finally:
+        engine.dispose()
+
+
 def _json(value):
     """A JSON column as read back by raw SQL: a dict on PostgreSQL, text on SQLite."""
     import json

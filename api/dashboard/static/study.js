@@ -109,10 +109,10 @@ async function renderPlots() {
   const list = [...trials.values()];
   const xKey = document.getElementById("pareto-x").value;
   const gmax = maxGeneration();
-  // The validation's fresh runs (the batch after the extra replicates) are not the search's: the
-  // ranking leaves them out (optimizer/objectives.py), so a failed one does not fail its set here
-  // either; the validation table shows them.
-  const ranked = list.filter((t) => !study?.progress?.generations_total || t.generation <= gmax + 1);
+  // The validation's fresh runs are not the search's: the ranking leaves them out
+  // (optimizer/objectives.py), so a failed one does not fail its set here either; the validation
+  // table shows them.
+  const ranked = list.filter((t) => !isValidationRun(t));
   const validation = list.length - ranked.length;
   const pareto = paretoFigure(ranked, xKey, gmax, responses, study.f1_unit, study.f1_rule);
   Plotly.react("pareto-plot", pareto.data, pareto.layout, CONFIG);
@@ -173,8 +173,13 @@ function valuesText(valuesOf) {
 }
 
 // The measured responses of every run of an individual (its replicates), from the trials loaded.
+// The batch of fresh-seed validation runs, as the API numbers it (StudyDefinition.validation_batch).
+const isValidationRun = (t) => t.generation === study?.progress?.validation_batch;
+
+// A set's runs in the search (its fresh-seed validation runs are in the validation table).
 function runsOf(individual) {
-  const runs = [...trials.values()].filter((t) => t.individual === individual && t.state === "done");
+  const runs = [...trials.values()].filter(
+    (t) => t.individual === individual && t.state === "done" && !isValidationRun(t));
   const values = (r) => runs.map((t) => measuredValue(t, r)).filter((v) => v !== null);
   return { runs: runs.length, text: valuesText(values), measured: responses.some((r) => values(r).length) };
 }
@@ -231,9 +236,7 @@ function renderRecommendation(body) {
     }
     const trialId = (rec.trial_ids || [])[0]; // optimizer.pareto.summary: every replicate of the set
     const dl = el("dl", { class: "facts" }, ...rows.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
-    // A study stopped before its validation keeps the search's "pending": it will not come.
-    const verdict = rec.validation_status === "pending" && TERMINAL.has(study.status)
-      ? "not validated" : rec.validation_status;
+    const verdict = rec.validation_status; // a study that ended before its check stores "not validated"
     box.replaceChildren(
       el("p", { text: INTRO[verdict] || (responses.length === 1
         ? `The fastest Pareto member whose ${responseText(responses[0])} matches the experiment within tolerance:`
@@ -245,7 +248,7 @@ function renderRecommendation(body) {
     );
   }
   renderValidation(rec?.validation || [], responses[0]?.experiment?.measured || []);
-  headerHtml(document.getElementById("equivalent-response"), " per run");
+  headerHtml(document.getElementById("equivalent-response"), " per search run");
   const tbody = document.querySelector("#equivalent tbody");
   const rows = (body.equivalent || []).map((t) => {
     const { runs, text, measured } = runsOf(t.individual);
