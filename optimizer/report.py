@@ -330,8 +330,8 @@ def write_pareto_png(
             below += sum(x < left_edge for x in xs)
             xs = [max(x, left_edge) for x in xs]
         left_failed.scatter(xs, [row] * len(members), marker=marker, color=colour, s=22, clip_on=False)
-    measured = summary_json.get("responses_measured") or "N_t"
-    _failure_strip(left_failed, statuses, f"failed individuals: {len(failed)} (not ranked)", measured)
+    measured_names = summary_json.get("responses_measured") or "N_t"
+    _failure_strip(left_failed, statuses, f"failed individuals: {len(failed)} (not ranked)", measured_names)
     if below:
         left_failed.text(0.99, 0.06, f"{below} stopped cheaper than any measured set: at the left edge",
                          transform=left_failed.transAxes, ha="right", va="bottom", fontsize=7)
