@@ -10,11 +10,16 @@ the old database's processes is not carried: the driver's lease, and the hand-ov
 trials to executors (queued or running trials come back ``pending``, so the next driver sends them
 again). A study that was running comes back ``paused``: no process drives it until someone
 resumes it.
+
+Format 2 keeps each distinct trial scenario once, in ``scenarios``; a trial's ``scenario`` is its
+index there (every trial of a study usually shares one scenario, which was a quarter of a format
+1 archive, where each trial carried its own copy). Format 1 archives still restore.
 """
 
 from __future__ import annotations
 
 import base64
+import json
 from datetime import datetime
 from typing import Any
 
@@ -27,7 +32,8 @@ from api.store.base import chunks
 from api.store.studies import StudyStore
 from optimizer.protocols import StudyStatus, TrialState
 
-ARCHIVE_FORMAT = "demcal-study-archive/1"
+ARCHIVE_FORMAT = "demcal-study-archive/2"
+READABLE_FORMATS = ("demcal-study-archive/1", ARCHIVE_FORMAT)  # 1: a scenario in every trial
 NOT_CARRIED = frozenset({"driver", "driver_until"})  # the old database's lease
 UNFINISHED = (TrialState.QUEUED.value, TrialState.RUNNING.value)
 
@@ -65,6 +71,16 @@ def _columns_of(record: dict[str, Any], table: sa.Table, what: str) -> dict[str,
     return {key: _decode(value) for key, value in record.items() if key not in NOT_CARRIED}
 
 
+def _shared_scenario(scenarios: Any, number: Any, trial: Any) -> Any:
+    """A format 2 trial's scenario: the one its index names in the archive's ``scenarios``."""
+    if not isinstance(scenarios, list) or type(number) is not int or not 0 <= number < len(scenarios):
+        raise InvalidInputError(
+            f"trial {trial!r} names scenario {number!r}, which the archive's scenarios list does not "
+            "hold: the archive is damaged; make it again with `demcal studies archive STUDY_ID`"
+        )
+    return scenarios[number]
+
+
 class StudyArchives(StudyStore):
     def archive_study(self, study_id: str) -> dict[str, Any]:
         """The study and all its trials as a JSON-able document (``ARCHIVE_FORMAT``)."""
@@ -76,21 +92,32 @@ class StudyArchives(StudyStore):
                 .options(undefer(TrialRow.scenario), undefer(TrialRow.result))
                 .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate, TrialRow.id)
             ).all()
+            records = [_row_dict(t, TrialRow.__table__) for t in trials]
+            scenarios: list[Any] = []
+            index: dict[str, int] = {}
+            for record in records:
+                key = json.dumps(record["scenario"], sort_keys=True)
+                if key not in index:
+                    index[key] = len(scenarios)
+                    scenarios.append(record["scenario"])
+                record["scenario"] = index[key]
             return {
                 "format": ARCHIVE_FORMAT,
                 "study": _row_dict(row, StudyRow.__table__),
-                "trials": [_row_dict(t, TrialRow.__table__) for t in trials],
+                "scenarios": scenarios,
+                "trials": records,
             }
 
     def restore_study(self, archive: dict[str, Any]) -> str:
         """Insert an archived study under its own id; its id. A study that was running comes back
         paused, and its queued or running trials pending (see the module docstring)."""
-        if not isinstance(archive, dict) or archive.get("format") != ARCHIVE_FORMAT:
+        if not isinstance(archive, dict) or archive.get("format") not in READABLE_FORMATS:
             found = archive.get("format") if isinstance(archive, dict) else type(archive).__name__
             raise InvalidInputError(
                 f"not a study archive (format {found!r}; expected {ARCHIVE_FORMAT!r}): "
                 "make one with `demcal studies archive STUDY_ID`"
             )
+        shared = archive.get("scenarios") if archive["format"] == ARCHIVE_FORMAT else None
         study = _columns_of(archive.get("study") or {}, StudyRow.__table__, "study")
         study_id = study.get("id")
         if not study_id:
@@ -101,6 +128,8 @@ class StudyArchives(StudyStore):
         trials = []
         for record in archive.get("trials") or []:
             trial = _columns_of(record, TrialRow.__table__, "trial")
+            if shared is not None:
+                trial["scenario"] = _shared_scenario(shared, trial.get("scenario"), trial.get("id"))
             if trial.get("study_id") != study_id:
                 raise InvalidInputError(f"trial {trial.get('id')!r} belongs to another study")
             if trial.get("state") in UNFINISHED:

@@ -330,6 +330,8 @@ def test_an_archived_study_restored_into_another_database_finishes_as_the_origin
     source.mark_running(in_flight[0], worker="w1")
 
     archive = json.loads(json.dumps(source.archive_study(study_id)))
+    # The trials share one scenario, kept once (format 2), not in each of them.
+    assert len(archive["scenarios"]) == 1 and {t["scenario"] for t in archive["trials"]} == {0}
     restored_id = store.restore_study(archive)
 
     restored = store.load_study(restored_id)
@@ -371,3 +373,31 @@ def test_restoring_a_study_twice_or_a_foreign_document_is_refused(store):
         store.restore_study(future)
     with pytest.raises(NotFoundError):
         store.archive_study("st-nope")
+
+
+def test_an_archive_of_format_1_restores_and_a_damaged_scenario_index_is_refused(
+    store, tmp_path, sqlite_template
+):
+    """Format 1 (a scenario in every trial, sessions before 11) still restores; a format 2 trial
+    naming a scenario the archive does not hold is refused with what to do."""
+    import shutil
+
+    from api.db import create_db_engine
+    from api.errors import InvalidInputError
+    from api.store import SqlStore
+
+    shutil.copy(sqlite_template, tmp_path / "source.db")
+    source = SqlStore(create_db_engine(f"sqlite:///{tmp_path / 'source.db'}"))
+    study_id = source.create_study(_definition(), owner=None)
+    source.add_trials(_specs(study_id, 2))
+    archive = source.archive_study(study_id)
+    damaged = {**archive, "trials": [{**archive["trials"][0], "scenario": 5}]}
+    old = {
+        "format": "demcal-study-archive/1", "study": archive["study"],
+        "trials": [{**t, "scenario": archive["scenarios"][t["scenario"]]} for t in archive["trials"]],
+    }
+
+    with pytest.raises(InvalidInputError, match="names scenario 5"):
+        store.restore_study(damaged)
+    assert store.restore_study(old) == study_id
+    assert [r.spec for r in store.trials(study_id)] == [r.spec for r in source.trials(study_id)]
