@@ -19,6 +19,23 @@ The length the limit is a fraction of (``overlap_scale``) is a clump's smallest 
 rounded polyhedron's rounding r: its cores are r_a + r_b apart at contact, and the closest
 features that give the normal are those of the cores, so the overlap must stay a fraction of r
 (the kernels compare with the ``rounding`` column, which is a clump sphere's radius).
+
+The mass m behind the hardest impact (``impact_mass``) is where the two representations differ.
+A clump's faces are rows of bumps: whatever its orientation, it first lands on one sphere off
+the line through its centre of mass, and turns as that contact pushes, so the impact is carried
+by its smallest effective mass (``dem.timestep.effective_mass``, a corner's). A rounded
+polyhedron's face is flat and is one contact (``dem/rounded_contact.py``) whose crowned point
+lies under the centre of mass when the face lands level: nothing turns, the whole mass
+compresses the one spring K, and its overlap may reach only ``OVERLAP_LIMIT`` of r, which is a
+quarter of the item's thinnest dimension (2 mm on a phone, against the 3.65 mm of the clump's
+smallest sphere). The feeder's insertion places items edge-down into the gaps between the items
+already in (a narrow footprint fits lowest), and such a landing is what ended runs ``invalid``:
+a phone of the full feeder (seed 3, E = 1e7 Pa, e 0.5) standing on its 8 mm side face, tilted
+0.4 deg from level, hit the floor at 2.0 m/s and slowed from 1.99 to 0.68 m/s turning at only 7
+rad/s when its overlap passed 0.5 r; m v^2 / (K (0.5 r)^2) g^2 with its mass gives 1.3e7 Pa for
+that impact, what the run's message asked for, where its effective mass (0.028 of 0.172 kg)
+gives 2.2e6 Pa. The energy bound says the same: the spring can take at most the body's whole
+kinetic energy, 1/2 K delta^2 <= 1/2 m v^2, so m is the safe choice, and the flat face reaches it.
 """
 
 from __future__ import annotations
@@ -29,6 +46,15 @@ from dem.clump import Clump
 from dem.contact import damping_ratio, wall_stiffness
 from dem.polyhedra import Polyhedron
 from dem.result import OVERLAP_LIMIT
+from dem.timestep import effective_mass
+
+
+def impact_mass(shape: Clump | Polyhedron) -> float:
+    """The mass (kg) behind this body's hardest impact on a wall: its whole mass for a rounded
+    polyhedron (a face landing level), its smallest effective mass for a clump (a corner)."""
+    if isinstance(shape, Polyhedron):
+        return float(shape.mass)
+    return effective_mass(shape)
 
 
 def overlap_scale(shape: Clump | Polyhedron) -> float:

@@ -381,18 +381,18 @@ def softest_valid_E(config: FeederConfig, e: float) -> float:
     """The E below which insertion makes runs ``invalid`` (``dem/validity.py``), estimated.
 
     The hardest impact of a run is an item's drop at insertion: created at most the wall height
-    plus the insertion zone above the floor, it lands at ``v = sqrt(2 g h)``. A randomly oriented
-    item lands on an edge or a corner, where it is lighter than its mass (its rotation gives way):
-    its smallest effective mass (``dem.timestep.effective_mass``) against its smallest sphere (a
-    rounded polyhedron: its rounding, ``dem.validity.overlap_scale``).
+    plus the insertion zone above the floor, it lands at ``v = sqrt(2 g h)``, with the mass that
+    ``dem.validity.impact_mass`` says carries it (a clump lands on a corner, where it is lighter
+    than its mass because it turns; a rounded polyhedron can land on a face level, with its whole
+    mass) against its ``overlap_scale`` (a clump's smallest sphere, a polyhedron's rounding).
     The estimate is the largest over one nominal item per kind (``items.spread`` moves it by
-    about 2 x spread). It is an estimate: a flat landing, or a drop from lower, moves the real
-    threshold by a factor of about two either way (measured on the quick feeder at e = 0.5 and
-    0.9: invalid runs at 5e5 and 1e6 Pa, none at 1e6 and 2e6 Pa, against estimates of 1.4e6 and
-    2.5e6 Pa).
+    about 2 x spread). It is an estimate: a drop from lower moves the real threshold down (clumps
+    on the quick feeder at e = 0.5 and 0.9: invalid runs at 5e5 and 1e6 Pa, none at 1e6 and 2e6
+    Pa, against estimates of 1.4e6 and 2.5e6 Pa; polyhedra on the full feeder at e 0.5: a phone
+    landing on its side face from 0.2 m needed 1.3e7 Pa, against an estimate of 2.3e7 Pa for the
+    full drop).
     """
-    from dem.timestep import effective_mass
-    from dem.validity import overlap_scale
+    from dem.validity import impact_mass, overlap_scale
     from dem.validity import softest_valid_E as softest
 
     nominal = config.items.model_copy(
@@ -403,7 +403,7 @@ def softest_valid_E(config: FeederConfig, e: float) -> float:
     return max(
         softest(
             speed,
-            effective_mass(item.shape),
+            impact_mass(item.shape),
             item.shape.equivalent_diameter,
             overlap_scale(item.shape),
             e,

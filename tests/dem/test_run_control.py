@@ -284,3 +284,44 @@ def test_the_feeder_estimates_the_softest_valid_E_of_its_rounded_polyhedra_from_
     # Thinner than the clumps' smallest spheres: the same drop must be stiffer to stay valid.
     assert max(roundings) < 0.01
     assert softest_valid_E(polyhedra, 0.5) > 2 * softest_valid_E(clumps, 0.5)
+
+
+def _phone_landing_flat(E, speed):
+    """The feeder's nominal smartphone as a rounded polyhedron, landing on its face level (its
+    thinnest principal axis vertical) at ``speed``, without gravity; returns the run's report."""
+    from dem.scenarios.feeder import make_items
+    from dem.scenarios.feeder_config import load_feeder_config
+
+    config = load_feeder_config("examples/feeder.toml")
+    items = config.items.model_copy(
+        update={"representation": "polyhedron", "counts": {"smartphone": 1}, "spread": 0.0}
+    )
+    phone = make_items(items, np.random.default_rng(0))[0].shape
+    assert np.argmax(phone.inertia) == 2  # the principal frame's z is the phone's thickness
+    params = ContactParams(E=E, nu=0.3, e=0.5, mu=0.5)
+    sim = Simulation(params, gravity=(0, 0, 0), domain_min=(-1, -1, -1), domain_max=(1, 1, 1))
+    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 0.4))
+    bottom = -phone.core[:, 2].min() + phone.rounding
+    sim.add_body(phone, (0, 0, bottom + 1e-7), velocity=(0, 0, -speed))
+    return sim.run(0.01)
+
+
+def test_a_rounded_phone_landing_flat_from_the_insertion_drop_is_valid_above_the_feeders_estimate():
+    """A level face is one contact under the centre of mass: the phone's whole mass, not its
+    corner's effective mass, compresses the spring (``dem.validity.impact_mass``), so the feeder's
+    softest valid E for polyhedra must hold for that landing, and not be far above it."""
+    from dem.scenarios.feeder import GRAVITY, _FeederRun, softest_valid_E
+    from dem.scenarios.feeder_config import load_feeder_config
+
+    config = load_feeder_config("examples/feeder.toml")
+    polyhedra = config.model_copy(
+        update={"items": config.items.model_copy(update={"representation": "polyhedron"})}
+    )
+    threshold = softest_valid_E(polyhedra, 0.5)
+    speed = math.sqrt(2 * GRAVITY * (config.tray.wall_height + _FeederRun.INSERT_ZONE_HEIGHT))
+
+    above = _phone_landing_flat(1.1 * threshold, speed)
+    below = _phone_landing_flat(0.8 * threshold, speed)
+
+    assert above.ok, above.message
+    assert below.status == "invalid", below.message
