@@ -181,7 +181,7 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
         ("compute_forces", lambda: compute_forces(bodies, spheres, mat, walls, lists, grav, lim, 0.0)),
         (
             "  sphere/piece pairs",
-            lambda: _sphere_pair_forces(bodies, spheres, lists.pairs, lists.grid.moved, lim, 0.0),
+            lambda: _sphere_pair_forces(bodies, spheres, lists.pairs, lists.grid.moved2, lim, 0.0),
         ),
         (
             "  sphere/piece-facet pairs",

@@ -34,7 +34,6 @@ from __future__ import annotations
 import math
 
 import numba
-import numpy as np
 
 from dem.conf import JIT_FLAGS, STEP_FLAGS
 from dem.contact import (
@@ -50,7 +49,7 @@ from dem.contact import (
 from dem.convex import at_point, place_body
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
-from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_GROUPS, N_PAIRS
+from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS, N_WALKS
 from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry
 
 
@@ -180,13 +179,12 @@ def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_lim
     (``dem/conf.py``: ``STEP_FLAGS``): it must not allocate nor return an array.
     """
     force, torque, mass = bodies.force, bodies.torque, bodies.mass
-    moved2, moved = lists.grid.moved2, lists.grid.moved
     for b in range(mass.shape[0]):
         for k in range(3):
             force[b, k] = mass[b] * gravity[k]
             torque[b, k] = 0.0
-        moved[b] = math.sqrt(moved2[b])
-    n_pairs, bad = _sphere_pair_forces(bodies, spheres, lists.pairs, moved, overlap_limit, hist_dt)
+    moved2 = lists.grid.moved2
+    n_pairs, bad = _sphere_pair_forces(bodies, spheres, lists.pairs, moved2, overlap_limit, hist_dt)
     if bad >= 0:
         return n_pairs, bad
     n_walls, bad = _wall_forces(bodies, spheres, material, walls, lists.wall_pairs, overlap_limit, hist_dt)
@@ -194,17 +192,19 @@ def compute_forces(bodies, spheres, material, walls, lists, gravity, overlap_lim
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _sphere_pair_forces(bodies, spheres, pairs, moved, lim, hist_dt):
+def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
     """Sphere-sphere contacts. Returns (contacts carrying force, offending body or -1).
 
     A scan without branches first lists the pairs that need work (touching, or holding a spring
     to clear) in ``pairs.touch``: about half of a settled packing's listed pairs touch, and
     deciding that inside the force loop cost a mispredicted jump a pair (10,140 settling spheres:
-    883 -> 732 us a pass). The scan visits only the pairs whose gap at the build the moves of
-    their bodies' spheres since then (``moved``, from ``dem.integrate.update_spheres``) could
-    have closed: |x_i - x_j| >= d_build - |dx_i| - |dx_j|. In the shaken feeder about 2 % of the
-    listed pairs touch and about 30 % are visited (``benchmarks/README.md``, engine speed
-    session 10). A body pair with one listed sphere pair (two plain
+    883 -> 732 us a pass). In a group of several pairs (two clumps or pieces) the scan visits
+    only the pairs whose gap at the build the moves of their bodies' spheres since then
+    (``moved2``, squared, from ``dem.integrate.update_spheres``) could have closed:
+    |x_i - x_j| >= d_build - |dx_i| - |dx_j|. In the shaken feeder about 2 % of the listed pairs
+    touch and about 30 % are visited (``benchmarks/README.md``, engine speed session 10). A
+    group of one pair is scanned as it is: walking it costs a sphere packing more than it saves
+    (session 11). A body pair with one listed sphere pair (two plain
     spheres: every pair of a sphere packing) carries its whole law, so its force is applied in the
     first pass over those. The others need their group's sums first: the first pass keeps their
     geometry and adds their ``share_sums`` (and count) to the group's, the second applies their
@@ -236,36 +236,33 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved, lim, hist_dt):
     n_pp = pairs.count[N_PAIRS]
     # The pairs that need work: touching, or holding a spring to clear. Branch-free, so that a
     # packing's half-touching pairs cost no mispredicted jumps here.
-    # A pair farther apart at the build than its bodies' spheres have moved since (``moved``)
-    # neither touches nor holds a spring, and its overlap is still the -1 of the build: a group's
-    # pairs are visited by their gap then (``by_gap``, ``gap``) only while a move could have closed
-    # it, and the ones that need work put back in list order. The moves only grow until the next
-    # build, so a pair once visited is visited at every step until then.
-    touch, group_start, by_gap, gap = pairs.touch, pairs.group_start, pairs.by_gap, pairs.gap
+    # The groups of several pairs (``walk``) lie between runs of lone pairs, which are scanned
+    # as they are. A pair of such a group farther apart at the build than its bodies' spheres
+    # have moved since neither touches nor holds a spring, and its overlap is still the -1 of the
+    # build: the group's pairs are visited by their gap then (``by_gap``, ``gap``) only while a
+    # move could have closed it, and the ones that need work put back in list order. The moves
+    # only grow until the next build, so a pair once visited is visited at every step until then.
+    touch, walk, by_gap, gap = pairs.touch, pairs.walk, pairs.by_gap, pairs.gap
     n_touch = 0
-    for g in range(pairs.count[N_GROUPS]):
-        p_first, p_end = group_start[g], group_start[g + 1]
-        # A lone pair (every pair of a sphere packing) is scanned as it is: the walk would cost
-        # more than it saves (the 2 s tray: 2.3-2.4 -> 2.6-3.2 s CPU).
-        closable = np.inf
-        if p_end - p_first > 1:
-            closable = moved[sbody[pp_i[p_first]]] + moved[sbody[pp_j[p_first]]]
+    p_lone = 0
+    for w in range(pairs.count[N_WALKS] + 1):
+        p_first, p_end = walk[w, 0], walk[w, 1]
+        for p in range(p_lone, p_first):
+            pp_delta[p] = -1.0
+            touch[n_touch] = p
+            n_touch += _needs_work(x, radius, pp_hist, pp_i[p], pp_j[p], p)
+        p_lone = p_end
+        if p_first == p_end:
+            continue
+        closable = math.sqrt(moved2[sbody[pp_i[p_first]]]) + math.sqrt(moved2[sbody[pp_j[p_first]]])
         t_first = n_touch
         for k in range(p_first, p_end):
             if gap[k] > closable:
                 break
             p = by_gap[k]
-            i, j = pp_i[p], pp_j[p]
-            dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
-            rs = radius[i] + radius[j]
             pp_delta[p] = -1.0
             touch[n_touch] = p
-            n_touch += (
-                (dx * dx + dy * dy + dz * dz < rs * rs)
-                | (pp_hist[p, 0] != 0.0)
-                | (pp_hist[p, 1] != 0.0)
-                | (pp_hist[p, 2] != 0.0)
-            )
+            n_touch += _needs_work(x, radius, pp_hist, pp_i[p], pp_j[p], p)
         for t_at in range(t_first + 1, n_touch):  # insertion sort: a few pairs a group
             p_at = touch[t_at]
             t_to = t_at - 1
@@ -394,6 +391,20 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved, lim, hist_dt):
         _twist(torque, bb, -tx, -ty, -tz)
         n_contacts += 1
     return n_contacts, -1
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _needs_work(x, radius, hist, i, j, p):
+    """Whether listed pair p (spheres i and j) touches or holds a spring to clear, without
+    branches."""
+    dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+    rs = radius[i] + radius[j]
+    return (
+        (dx * dx + dy * dy + dz * dz < rs * rs)
+        | (hist[p, 0] != 0.0)
+        | (hist[p, 1] != 0.0)
+        | (hist[p, 2] != 0.0)
+    )
 
 
 @numba.njit(inline="always", **JIT_FLAGS)

@@ -10,9 +10,11 @@ rebuild. Sphere pairs are ordered by (body a, body b, sphere i, sphere j), so ea
 sphere contacts are contiguous (a *group*: the resolution rule of ``dem/contact.py`` shares the
 pair's stiffness among them); sphere-facet pairs by (sphere, facet). Tangential history lives in
 an array parallel to each list and is carried across rebuilds by merging the two sorted lists.
-Each build also orders every group's pairs by their gap then (``by_gap``, ``gap``) and restarts
-the bodies' largest sphere moves (``Grid.moved2``): a pair whose gap exceeds its two bodies' moves
-since cannot touch, and the force pass does not visit it (``dem/forces.py``).
+Each build also lists the groups of several pairs (``walks``: two clumps or pieces), orders each
+one's pairs by their gap then (``by_gap``, ``gap``) and restarts the bodies' largest sphere moves
+(``Grid.moved2``): a pair whose gap exceeds its two bodies' moves since cannot touch, and the force
+pass does not visit it (``dem/forces.py``). A group of one pair (every pair of a sphere packing) is
+scanned as it is.
 
 The containers (``Grid``, ``SpherePairs``, ``WallPairs``, bundled as ``Neighbours``) are built
 and grown here, in Python, between kernel calls; the kernels never allocate. A list that lacks
@@ -35,8 +37,8 @@ from dem.convex import SIMPLEX
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 
 # Layout of a list's ``count``: pairs in use, groups in use (sphere pairs), room needed after a
-# failed build.
-N_PAIRS, N_GROUPS, N_NEEDED = 0, 1, 2
+# failed build, groups of several pairs (sphere pairs).
+N_PAIRS, N_GROUPS, N_NEEDED, N_WALKS = 0, 1, 2, 3
 # Columns of ``SpherePairs.group_law`` (filled at each build by ``dem.forces.body_pair_laws``).
 G_KN, G_CN, G_KT, G_CT, G_MU = 0, 1, 2, 3, 4
 _MIN_CAPACITY = 1024
@@ -56,13 +58,12 @@ class Grid(NamedTuple):
     candidates: np.ndarray  # (n_spheres,) int64 scratch: one sphere's partners while sorting them
     x_build: np.ndarray  # (n_spheres, 3) sphere centres at the last build (the skin criterion)
     moved2: np.ndarray  # (n_bodies,) largest squared move of any of a body's spheres since the last build
-    moved: np.ndarray  # (n_bodies,) its square root, refreshed by the force pass at each step
 
 
 class SpherePairs(NamedTuple):
     """Sphere pairs of different bodies, grouped by body pair, with their tangential history."""
 
-    count: np.ndarray  # (3,) int64: N_PAIRS, N_GROUPS, N_NEEDED
+    count: np.ndarray  # (4,) int64: N_PAIRS, N_GROUPS, N_NEEDED, N_WALKS
     i: np.ndarray  # (capacity,) int32 first sphere (i < j)
     j: np.ndarray  # (capacity,) int32
     hist: np.ndarray  # (capacity, 3) tangential spring elongation
@@ -79,8 +80,8 @@ class SpherePairs(NamedTuple):
     moment: np.ndarray  # (capacity, 3) scratch of the force pass: its patch's second moments
     simplex: np.ndarray  # (capacity, SIMPLEX) int32 rounded pieces: last GJK simplex (any is valid)
     touch: np.ndarray  # (capacity,) int32 scratch of the force pass: the pairs it works on, in order
-    group_start: np.ndarray  # (capacity + 1,) int32 first pair of each group (a group's pairs are contiguous)
-    by_gap: np.ndarray  # (capacity,) int32 each group's pairs by their gap at the build
+    walk: np.ndarray  # (capacity + 1, 2) int32 first and end pair of each group of several pairs, then (n, n)
+    by_gap: np.ndarray  # (capacity,) int32 in such a group's range: its pairs by their gap at the build
     gap: np.ndarray  # (capacity,) those gaps, in that order
 
 
@@ -139,7 +140,6 @@ def sized_grid(grid: Grid | None, n_spheres: int, n_bodies: int) -> Grid:
         np.zeros(n_spheres, dtype=np.int64),
         x_build,
         np.zeros(n_bodies),
-        np.zeros(n_bodies),
     )
 
 
@@ -164,7 +164,7 @@ def _kept(new: np.ndarray, old: np.ndarray | None, n: int) -> np.ndarray:
 
 def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
     n = int(old.count[N_PAIRS]) if old is not None else 0
-    count = old.count if old is not None else np.zeros(3, dtype=np.int64)
+    count = old.count if old is not None else np.zeros(4, dtype=np.int64)
 
     def ints(name):
         return _kept(np.zeros(capacity, dtype=_INDEX), getattr(old, name, None), n)
@@ -187,7 +187,7 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
         np.zeros((capacity, 3)),
         np.zeros((capacity, SIMPLEX), dtype=_INDEX),
         np.zeros(capacity, dtype=_INDEX),
-        np.zeros(capacity + 1, dtype=_INDEX),
+        np.zeros((capacity + 1, 2), dtype=_INDEX),
         np.zeros(capacity, dtype=_INDEX),
         np.zeros(capacity),
     )
@@ -487,29 +487,37 @@ _GAP_ROUNDING = 1e-8
 
 @numba.njit(**JIT_FLAGS)
 def _sphere_pair_gaps(pairs, spheres):
-    """Each group's first pair, and its pairs ordered by their gap |x_i - x_j| - r_i - r_j at the
-    build (-inf for a pair holding a spring), with every pair's overlap reset to -1 (apart): the
-    force pass visits a group's pairs only as far as its bodies' moves since the build could have
-    closed a gap (``dem/forces.py``)."""
+    """The groups of several pairs (``walk``), each one's pairs ordered by their gap
+    |x_i - x_j| - r_i - r_j at the build (-inf for a pair holding a spring), and every pair's
+    overlap reset to -1 (apart): the force pass visits such a group's pairs only as far as its
+    bodies' moves since the build could have closed a gap (``dem/forces.py``)."""
     pp_i, pp_j, pp_hist, pp_group = pairs.i, pairs.j, pairs.hist, pairs.group
-    group_start, by_gap, gap = pairs.group_start, pairs.by_gap, pairs.gap
+    walk, by_gap, gap = pairs.walk, pairs.by_gap, pairs.gap
     x, radius = spheres.x, spheres.radius
     n_pp = pairs.count[N_PAIRS]
-    gaps = np.empty(n_pp)
-    for p in range(n_pp):
-        pairs.delta[p] = -1.0
-        if p == 0 or pp_group[p] != pp_group[p - 1]:
-            group_start[pp_group[p]] = p
-        i, j = pp_i[p], pp_j[p]
-        rs = radius[i] + radius[j]
-        d = np.sqrt((x[i, 0] - x[j, 0]) ** 2 + (x[i, 1] - x[j, 1]) ** 2 + (x[i, 2] - x[j, 2]) ** 2)
-        gaps[p] = d - rs - _GAP_ROUNDING * rs
-        if pp_hist[p, 0] != 0.0 or pp_hist[p, 1] != 0.0 or pp_hist[p, 2] != 0.0:
-            gaps[p] = -np.inf
-    group_start[pairs.count[N_GROUPS]] = n_pp
-    # By gap, then (stably) by group: each group's range holds its pairs by gap.
-    order = np.argsort(gaps, kind="mergesort")
-    order = order[np.argsort(pp_group[:n_pp][order], kind="mergesort")]
-    for k in range(n_pp):
-        by_gap[k] = order[k]
-        gap[k] = gaps[order[k]]
+    n_walks = 0
+    p_first = 0
+    for p in range(n_pp + 1):
+        if p < n_pp:
+            pairs.delta[p] = -1.0
+            if p == 0 or pp_group[p] == pp_group[p - 1]:
+                continue
+        if p - p_first > 1:
+            walk[n_walks, 0], walk[n_walks, 1] = p_first, p
+            n_walks += 1
+            for k in range(p_first, p):
+                i, j = pp_i[k], pp_j[k]
+                rs = radius[i] + radius[j]
+                d = np.sqrt((x[i, 0] - x[j, 0]) ** 2 + (x[i, 1] - x[j, 1]) ** 2 + (x[i, 2] - x[j, 2]) ** 2)
+                g = d - rs - _GAP_ROUNDING * rs
+                if pp_hist[k, 0] != 0.0 or pp_hist[k, 1] != 0.0 or pp_hist[k, 2] != 0.0:
+                    g = -np.inf
+                # Insertion sort, stable: a group holds a few dozen pairs at most.
+                at = k
+                while at > p_first and gap[at - 1] > g:
+                    gap[at], by_gap[at] = gap[at - 1], by_gap[at - 1]
+                    at -= 1
+                gap[at], by_gap[at] = g, k
+        p_first = p
+    walk[n_walks, 0], walk[n_walks, 1] = n_pp, n_pp
+    pairs.count[N_WALKS] = n_walks
