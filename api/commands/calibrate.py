@@ -125,13 +125,13 @@ def _create(store, definition, leases) -> str:
 
 def _resume(store, study_id: str, leases) -> str:
     from api.errors import NotFoundError
-    from optimizer.protocols import StudyStatus
+    from optimizer.protocols import FINISHED_STUDIES, StudyStatus
 
     try:
         study = store.load_study(study_id)
     except NotFoundError:
         _fail(f"no study {study_id!r} in this database; check DEMCAL_DATABASE_URL and the id")
-    if study.status in (StudyStatus.DONE, StudyStatus.CANCELLED, StudyStatus.FAILED):
+    if study.status in FINISHED_STUDIES:
         _fail(f"study {study_id} is {study.status.value}; only a paused or running study can be resumed")
     if not leases.acquire(study_id):
         holder, until = leases.holder(study_id) or ("another process", None)
