@@ -11,7 +11,9 @@ named tuple (numba passes one as cheaply as its arrays). This module does no phy
 A rounded polyhedron (``dem/polyhedra.py``) takes one sphere row per convex piece: the piece's
 bounding sphere (``radius`` its reach, ``offset`` its centre) serves the neighbour search, and
 ``core_start``/``core_count`` point at the piece's core vertices in ``core`` (body frame), with
-``rounding`` its r. A clump's spheres have ``core_count`` 0 and ``rounding`` = ``radius``.
+``rounding`` its r, and ``half`` the half sizes of the core's box about ``offset`` (body axes), a
+tighter bound than the sphere for the contact kernels' rejections. A clump's spheres have
+``core_count`` 0, ``rounding`` = ``radius`` and ``half`` 0.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ class SphereArrays(NamedTuple):
     core_start: np.ndarray  # (n,) int64 first core vertex of a piece
     core_count: np.ndarray  # (n,) int64 its number of core vertices; 0 for a clump's sphere
     crown: np.ndarray  # (n, 3) a piece's crown (dem.polyhedra.Polyhedron.crown); 0 for a sphere
+    half: np.ndarray  # (n, 3) half sizes of a piece's core box about offset, body axes; 0 for a sphere
     core: np.ndarray  # (m, 3) every piece's core vertices, body frame
     eye: np.ndarray  # (3, 3) identity: the rotation of points given in world coordinates
     zero: np.ndarray  # (3,)
@@ -120,10 +123,11 @@ class Bodies:
 
 
 def sphere_rows(shape: Clump | Polyhedron):
-    """(radius, offset, rounding, core_start, core_count, crown) of a shape's sphere rows;
+    """(radius, offset, rounding, core_start, core_count, crown, half) of a shape's sphere rows;
     core_start is relative to the shape's own ``core``."""
     if isinstance(shape, Polyhedron):
         n = shape.n_pieces
+        pieces = [shape.piece(k) for k in range(n)]
         return (
             np.array([shape.piece_reach(k) for k in range(n)]),
             np.array([shape.piece_centre(k) for k in range(n)]),
@@ -131,18 +135,29 @@ def sphere_rows(shape: Clump | Polyhedron):
             np.asarray(shape.piece_start, dtype=np.int64),
             np.asarray(shape.piece_count, dtype=np.int64),
             np.array([shape.crown(k) for k in range(n)]).reshape(n, 3),
+            np.array([0.5 * (core.max(axis=0) - core.min(axis=0)) for core in pieces]).reshape(n, 3),
         )
     n = shape.n_spheres
     radius = np.asarray(shape.radius, dtype=np.float64)
     zero = np.zeros(n, np.int64)
-    return radius, np.asarray(shape.offset), radius, zero, zero, np.zeros((n, 3))
+    return radius, np.asarray(shape.offset), radius, zero, zero, np.zeros((n, 3)), np.zeros((n, 3))
 
 
 class Spheres:
     """Per-sphere arrays: owning body, radius, body-frame offset, world position, and for the
     pieces of rounded polyhedra their rounding and core vertices."""
 
-    _ARRAYS = ("_body", "_radius", "_offset", "_x", "_rounding", "_core_start", "_core_count", "_crown")
+    _ARRAYS = (
+        "_body",
+        "_radius",
+        "_offset",
+        "_x",
+        "_rounding",
+        "_core_start",
+        "_core_count",
+        "_crown",
+        "_half",
+    )
 
     def __init__(self) -> None:
         self.n = 0
@@ -154,6 +169,7 @@ class Spheres:
         self._core_start = np.zeros(0, dtype=np.int64)
         self._core_count = np.zeros(0, dtype=np.int64)
         self._crown = np.zeros((0, 3))
+        self._half = np.zeros((0, 3))
         self._core = np.zeros((1, 3))  # one dummy row: never empty
         self._n_core = 0
         self._eye, self._zero, self._work = np.eye(3), np.zeros(3), scratch()
@@ -193,6 +209,7 @@ class Spheres:
             self._core_start[: self.n],
             self.core_count,
             self._crown[: self.n],
+            self._half[: self.n],
             self._core,
             self._eye,
             self._zero,
@@ -200,7 +217,7 @@ class Spheres:
         )
 
     def append(self, body: int, shape: Clump | Polyhedron, rot: np.ndarray, position: np.ndarray) -> int:
-        radius, offset, rounding, core_start, core_count, crown = sphere_rows(shape)
+        radius, offset, rounding, core_start, core_count, crown, half = sphere_rows(shape)
         k = len(radius)
         if self.n + k > len(self._radius):
             capacity = max(64, 2 * (self.n + k))
@@ -217,6 +234,7 @@ class Spheres:
         self._rounding[start : start + k] = rounding
         self._core_count[start : start + k] = core_count
         self._crown[start : start + k] = crown
+        self._half[start : start + k] = half
         if isinstance(shape, Polyhedron):
             vertices = np.asarray(shape.core, dtype=np.float64)
             if self._n_core + len(vertices) > len(self._core):

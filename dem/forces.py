@@ -50,7 +50,11 @@ from dem.convex import at_point, place_body
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
 from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS, N_WALKS
-from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry
+from dem.rounded_contact import WallFacet, box_extent, facet_geometry, pair_geometry
+
+# A piece's box clears a partner only by more than the rounding times this: the box and the
+# core's vertices are placed by different sums, which may differ in the last bits.
+BOX_SLACK = 1.0 + 1e-9
 
 
 @numba.njit(**JIT_FLAGS)
@@ -214,10 +218,11 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
     """
     x, radius, sbody = spheres.x, spheres.radius, spheres.body
     rounding, core_count = spheres.rounding, spheres.core_count
-    core, core_start, crown, work, rot = (
+    core, core_start, crown, half, work, rot = (
         spheres.core,
         spheres.core_start,
         spheres.crown,
+        spheres.half,
         spheres.work,
         bodies.rot,
     )
@@ -291,6 +296,15 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                 pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
             continue
         if core_count[i] > 0 or core_count[j] > 0:
+            # The pieces' boxes along the cached axis first: they clear most pairs whose bounding
+            # spheres overlap, as the cores would (``pair_geometry``'s first test), for less.
+            sx, sy, sz = pairs.axis[p, 0], pairs.axis[p, 1], pairs.axis[p, 2]
+            if sx != 0.0 or sy != 0.0 or sz != 0.0:
+                low_a, _ = box_extent(x, half, rot, i, sbody[i], sx, sy, sz)
+                _, high_b = box_extent(x, half, rot, j, sbody[j], sx, sy, sz)
+                if low_a - high_b > (rounding[i] + rounding[j]) * BOX_SLACK:
+                    pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
+                    continue
             # The pieces' cores (a plain sphere is a one-vertex core at its centre), written out
             # here on the arrays at hand: a helper given arrays or the containers costs an atomic
             # reference count up and down for each (25 for Bodies and Spheres), which was a third
@@ -492,6 +506,14 @@ def _wall_forces(bodies, spheres, material, walls, wall_pairs, lim, hist_dt):
                 x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
             )
             apart = s * s >= radius[i] * radius[i] * PLANE_SLACK
+        if not apart and spheres.core_count[i] > 0:
+            # The piece's box against the facet's plane first (``facet_geometry``'s first test
+            # on the core's vertices, for less).
+            nx, ny, nz = facets.normal[f, 0], facets.normal[f, 1], facets.normal[f, 2]
+            plane = facets.offset[f] + nx * wall_disp[w, 0] + ny * wall_disp[w, 1] + nz * wall_disp[w, 2]
+            low, high = box_extent(x, spheres.half, bodies.rot, i, sbody[i], nx, ny, nz)
+            reach = spheres.rounding[i] * BOX_SLACK
+            apart = low - plane > reach or plane - high > reach
         if not apart and spheres.core_count[i] > 0:
             b = sbody[i]
             core = place_body(spheres.core_start[i], spheres.core_count[i], bodies.rot, pos, b)

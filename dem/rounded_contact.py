@@ -12,6 +12,9 @@ of a face's dampers.
 
 Cheap rejections come first, so GJK runs only for pieces that nearly touch:
 
+* both: the box of a piece's core (``box_extent``: its body-frame box, turned with the body) is
+  taken along the direction first; a box that clears by the rounding clears the core, for three
+  dot products instead of two passes over the core's 48 vertices (the callers do this);
 * piece pairs: a cached separating direction per pair (the last normal): if the cores are
   further apart than ``r_a + r_b`` along it, the pair is apart without GJK (Bullet's
   separating-axis caching); else GJK starts from the pair's last simplex (its closest features
@@ -60,6 +63,20 @@ class WallFacet(NamedTuple):
     disp: tuple  # (x, y, z)
     normal: tuple  # (x, y, z)
     offset: float
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def box_extent(x, half, rot, i, b, nx, ny, nz):
+    """(lowest, highest) projection on n of the box of sphere row i's core: centre ``x[i]``
+    (world), half sizes ``half[i]`` along the axes of body b (the columns of ``rot[b]``). Bounds
+    the core's own extent (``_extent``) from outside; a plain sphere's box is its centre."""
+    c = x[i, 0] * nx + x[i, 1] * ny + x[i, 2] * nz
+    e = (
+        half[i, 0] * abs(rot[b, 0, 0] * nx + rot[b, 1, 0] * ny + rot[b, 2, 0] * nz)
+        + half[i, 1] * abs(rot[b, 0, 1] * nx + rot[b, 1, 1] * ny + rot[b, 2, 1] * nz)
+        + half[i, 2] * abs(rot[b, 0, 2] * nx + rot[b, 1, 2] * ny + rot[b, 2, 2] * nz)
+    )
+    return c - e, c + e
 
 
 @numba.njit(**JIT_FLAGS)

@@ -222,3 +222,36 @@ def test_gjk_warm_started_from_any_cached_simplex_gives_the_cold_answer(seed):
         gap = np.array(warm[1:4]) - np.array(warm[4:7])
         assert np.linalg.norm(gap) == pytest.approx(cold[0], rel=1e-12)
         assert gap @ (np.array(cold[1:4]) - np.array(cold[4:7])) == pytest.approx(cold[0] ** 2, rel=1e-9)
+
+
+def test_a_pieces_box_holds_its_core_along_every_direction():
+    """``box_extent`` is the kernels' first rejection: it must bound the core's placed vertices
+    from outside along any direction (so a box clear of a partner by the rounding means the
+    rounded piece is clear), for a piece whose core is not centred on the body's centre of mass."""
+    from dem.bodies import Spheres
+    from dem.quaternion import matrices
+    from dem.rounded_contact import box_extent
+    from dem.scenarios.feeder import make_items
+    from dem.scenarios.feeder_config import load_feeder_config
+
+    config = load_feeder_config("examples/feeder.toml")
+    items = config.items.model_copy(update={"representation": "polyhedron", "counts": {"camera": 1}})
+    camera = make_items(items, np.random.default_rng(0))[0].shape
+    assert camera.n_pieces == 2  # body slab and lens barrel: neither piece is centred on the body
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat)
+        rot = matrices(quat[None, :])[0]
+        pos = rng.uniform(-1.0, 1.0, size=3)
+        spheres = Spheres()
+        spheres.append(0, camera, rot, pos)
+        rows = spheres.arrays()
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        for k in range(camera.n_pieces):
+            heights = (pos + camera.piece(k) @ rot.T) @ n
+
+            low, high = box_extent(rows.x, rows.half, rot[None], k, 0, *n)
+
+            assert low <= heights.min() + 1e-15 and high >= heights.max() - 1e-15
