@@ -185,7 +185,7 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
         ),
         (
             "  sphere/piece-facet pairs",
-            lambda: _wall_forces(bodies, spheres, mat, walls, lists.wall_pairs, lim, 0.0),
+            lambda: _wall_forces(bodies, spheres, mat, walls, lists, lim, 0.0),
         ),
     ]
     if np.any(sim.spheres.arrays().core_count > 0):

@@ -114,7 +114,7 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
     live, live_spheres = live_rows(bodies.active, spheres.body)
     force_rebuild = need_forces or resume
     if need_forces and not resume:
-        _move_walls(walls, clk[K_T])
+        _move_walls(walls, clk[K_T], lists.grid)
         update_spheres(spheres, bodies, live_spheres, lists.grid)
         update_omega(bodies, live)
         if not _rebuild(lists, spheres, bodies, walls, settings, cnt):
@@ -171,7 +171,7 @@ def _steps(
             kick(bodies, live, half)
             drift(bodies, live, lb, dt)
             clk[K_T] += dt
-            _move_walls(walls, clk[K_T])
+            _move_walls(walls, clk[K_T], lists.grid)
             sphere_move2 = update_spheres(spheres, bodies, live_spheres, lists.grid)
             update_omega(bodies, live)
             sphere_move = math.sqrt(sphere_move2)
@@ -213,9 +213,16 @@ def _rebuild(lists, spheres, bodies, walls, settings, cnt):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _move_walls(walls, t):
+def _move_walls(walls, t, grid):
+    """The walls to their place at t; each one's largest travel since the last list build kept
+    in ``grid.wall_moved2`` (what lets the facet pass skip pairs that cannot have closed their gap)."""
+    disp, at_build, moved2 = walls.disp, grid.wall_build, grid.wall_moved2
     for w in range(walls.motion.shape[0]):
-        evaluate_into(walls.motion[w], t, walls.disp[w], walls.vel[w])
+        evaluate_into(walls.motion[w], t, disp[w], walls.vel[w])
+        dx, dy, dz = disp[w, 0] - at_build[w, 0], disp[w, 1] - at_build[w, 1], disp[w, 2] - at_build[w, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 > moved2[w]:
+            moved2[w] = d2
 
 
 @numba.njit(inline="always", **JIT_FLAGS)

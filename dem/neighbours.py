@@ -14,7 +14,10 @@ Each build also lists the groups of several pairs (``walks``: two clumps or piec
 one's pairs by their gap then (``by_gap``, ``gap``) and restarts the bodies' largest sphere moves
 (``Grid.moved2``): a pair whose gap exceeds its two bodies' moves since cannot touch, and the force
 pass does not visit it (``dem/forces.py``). A group of one pair (every pair of a sphere packing) is
-scanned as it is.
+scanned as it is. Sphere-facet pairs likewise: a body's pairs when they hold several of its spheres
+(a clump's or a polyhedron's) are tested by their gap at the build against the body's move and
+the walls' largest travel since (``Grid.wall_moved2``, kept by the run loop as it moves the
+walls).
 
 The containers (``Grid``, ``SpherePairs``, ``WallPairs``, bundled as ``Neighbours``) are built
 and grown here, in Python, between kernel calls; the kernels never allocate. A list that lacks
@@ -58,6 +61,8 @@ class Grid(NamedTuple):
     candidates: np.ndarray  # (n_spheres,) int64 scratch: one sphere's partners while sorting them
     x_build: np.ndarray  # (n_spheres, 3) sphere centres at the last build (the skin criterion)
     moved2: np.ndarray  # (n_bodies,) largest squared move of any of a body's spheres since the last build
+    wall_build: np.ndarray  # (n_walls, 3) each wall's displacement at the last build
+    wall_moved2: np.ndarray  # (n_walls,) its largest squared travel from there since
 
 
 class SpherePairs(NamedTuple):
@@ -88,7 +93,7 @@ class SpherePairs(NamedTuple):
 class WallPairs(NamedTuple):
     """Sphere-facet pairs sorted by (sphere, facet), with their tangential history."""
 
-    count: np.ndarray  # (3,) int64: N_PAIRS, unused, N_NEEDED
+    count: np.ndarray  # (4,) int64: N_PAIRS, unused, N_NEEDED, N_WALKS
     i: np.ndarray  # (capacity,) int32 sphere
     f: np.ndarray  # (capacity,) int32 facet
     hist: np.ndarray  # (capacity, 3)
@@ -101,6 +106,8 @@ class WallPairs(NamedTuple):
     keep: np.ndarray  # (capacity,) bool scratch of the force pass: the contact carries force
     moment: np.ndarray  # (capacity, 3) scratch of the force pass: a piece's patch moments
     touching: np.ndarray  # (capacity,) int32 scratch of the force pass: the touching pairs, in order
+    walk: np.ndarray  # (capacity + 1, 2) int32 first and end pair of a body's run of several spheres; (n, n)
+    gap: np.ndarray  # (capacity,) in such a run: each pair's gap at the build
 
 
 class Neighbours(NamedTuple):
@@ -115,14 +122,15 @@ class Neighbours(NamedTuple):
 def empty_neighbours() -> Neighbours:
     """Lists for no spheres, with the minimum capacity."""
     return Neighbours(
-        sized_grid(None, 0, 0), _sphere_pairs(_MIN_CAPACITY, None), _wall_pairs(_MIN_CAPACITY, None)
+        sized_grid(None, 0, 0, 0), _sphere_pairs(_MIN_CAPACITY, None), _wall_pairs(_MIN_CAPACITY, None)
     )
 
 
-def sized_grid(grid: Grid | None, n_spheres: int, n_bodies: int) -> Grid:
-    """A grid for ``n_spheres`` of ``n_bodies`` (the same one if it fits), keeping the build
-    positions of the spheres it had."""
-    if grid is not None and len(grid.x_build) == n_spheres and len(grid.moved2) == n_bodies:
+def sized_grid(grid: Grid | None, n_spheres: int, n_bodies: int, n_walls: int) -> Grid:
+    """A grid for ``n_spheres`` of ``n_bodies`` and ``n_walls`` (the same one if it fits),
+    keeping the build positions of the spheres it had."""
+    sizes = (n_spheres, n_bodies, n_walls)
+    if grid is not None and (len(grid.x_build), len(grid.moved2), len(grid.wall_moved2)) == sizes:
         return grid
     # At most this many cells (a few per sphere keeps the empty-cell overhead small); the kernel
     # enlarges the cells when the spheres' bounding box needs more.
@@ -140,6 +148,8 @@ def sized_grid(grid: Grid | None, n_spheres: int, n_bodies: int) -> Grid:
         np.zeros(n_spheres, dtype=np.int64),
         x_build,
         np.zeros(n_bodies),
+        np.zeros((n_walls, 3)),
+        np.zeros(n_walls),
     )
 
 
@@ -195,7 +205,7 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
 
 def _wall_pairs(capacity: int, old: WallPairs | None) -> WallPairs:
     n = int(old.count[N_PAIRS]) if old is not None else 0
-    count = old.count if old is not None else np.zeros(3, dtype=np.int64)
+    count = old.count if old is not None else np.zeros(4, dtype=np.int64)
     return WallPairs(
         count,
         _kept(np.zeros(capacity, dtype=_INDEX), getattr(old, "i", None), n),
@@ -210,6 +220,8 @@ def _wall_pairs(capacity: int, old: WallPairs | None) -> WallPairs:
         np.zeros(capacity, dtype=np.bool_),
         np.zeros((capacity, 3)),
         np.zeros(capacity, dtype=_INDEX),
+        np.zeros((capacity + 1, 2), dtype=_INDEX),
+        np.zeros(capacity),
     )
 
 
@@ -235,12 +247,17 @@ def rebuild_lists(lists, spheres, active, walls, skin, cell_min):
     _adopt_sphere_pairs(pairs, spheres.body, active.shape[0], n_pp)
     _adopt_wall_pairs(wall_pairs, n_wp)
     _sphere_pair_gaps(pairs, spheres)
+    _wall_pair_gaps(wall_pairs, spheres, walls)
     x, x_build, moved2 = spheres.x, grid.x_build, grid.moved2
     for s in range(x.shape[0]):
         for k in range(3):
             x_build[s, k] = x[s, k]
     for b in range(moved2.shape[0]):
         moved2[b] = 0.0
+    for w in range(grid.wall_moved2.shape[0]):
+        for k in range(3):
+            grid.wall_build[w, k] = walls.disp[w, k]
+        grid.wall_moved2[w] = 0.0
     return True
 
 
@@ -521,3 +538,41 @@ def _sphere_pair_gaps(pairs, spheres):
         p_first = p
     walk[n_walks, 0], walk[n_walks, 1] = n_pp, n_pp
     pairs.count[N_WALKS] = n_walks
+
+
+@numba.njit(**JIT_FLAGS)
+def _wall_pair_gaps(wall_pairs, spheres, walls):
+    """The bodies' runs of sphere-facet pairs that hold several of their spheres (``walk``),
+    their pairs' gaps |x_i - facet| - r_i at the build (-inf for a pair holding a spring), and
+    every pair reset to apart (overlap -1, no force): the force pass examines such a pair only
+    when the body's move and the walls' travel since the build could have closed its gap
+    (``dem/forces.py``). A facet moves with its wall, as a translation."""
+    wp_i, wp_f, wp_hist = wall_pairs.i, wall_pairs.f, wall_pairs.hist
+    walk, gap = wall_pairs.walk, wall_pairs.gap
+    x, radius, sbody = spheres.x, spheres.radius, spheres.body
+    facets, wall_disp = walls.facets, walls.disp
+    n_wp = wall_pairs.count[N_PAIRS]
+    n_walks = 0
+    p_first = 0
+    for p in range(n_wp + 1):
+        if p < n_wp:
+            wall_pairs.delta[p] = -1.0
+            wall_pairs.keep[p] = False
+            if p == 0 or sbody[wp_i[p]] == sbody[wp_i[p - 1]]:
+                continue
+        if p > p_first and wp_i[p_first] != wp_i[p - 1]:
+            walk[n_walks, 0], walk[n_walks, 1] = p_first, p
+            n_walks += 1
+            for k in range(p_first, p):
+                i, f = wp_i[k], wp_f[k]
+                w = facets.wall[f]
+                d2, _, _, _, _ = closest_point_on_facet(
+                    x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]
+                )
+                g = np.sqrt(d2) - radius[i] - _GAP_ROUNDING * radius[i]
+                if wp_hist[k, 0] != 0.0 or wp_hist[k, 1] != 0.0 or wp_hist[k, 2] != 0.0:
+                    g = -np.inf
+                gap[k] = g
+        p_first = p
+    walk[n_walks, 0], walk[n_walks, 1] = n_wp, n_wp
+    wall_pairs.count[N_WALKS] = n_walks

@@ -490,7 +490,7 @@ class Simulation:
     def _prepare(self) -> None:
         """Size the lists' per-sphere state and the event list, and settle the run's settings."""
         ns = self.spheres.n
-        grid = neighbours.sized_grid(self._lists.grid, ns, self.bodies.n)
+        grid = neighbours.sized_grid(self._lists.grid, ns, self.bodies.n, len(self._walls.motion))
         if grid is not self._lists.grid:
             self._lists = self._lists._replace(grid=grid)
             self._stale = True

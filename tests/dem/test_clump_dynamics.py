@@ -200,8 +200,9 @@ def test_elastic_frictionless_clumps_with_staggered_rows_conserve_energy_and_mom
 
 def test_clump_contacts_do_not_depend_on_the_verlet_skin():
     # The neighbour lists only save work: lists built rarely with a wide skin, whose force pass
-    # passes over the pairs that the bodies' moves since the build cannot have brought into
-    # contact, must find every contact at the step lists rebuilt almost every step find it. Three
+    # passes over the pairs that the bodies' moves (and the floor's travel) since the build cannot
+    # have brought into contact, must find every contact at the step lists rebuilt almost every
+    # step find it (ignoring the floor's travel fails here). Three
     # tumbling box clumps fall onto each other and onto a shaken floor. Only the order in which a
     # body's forces are summed may differ (a body pair's lone listed sphere pair is applied in the
     # first pass), so the two runs agree to rounding; a contact found one step late would not.
