@@ -10,6 +10,14 @@ seeds would confirm. Cheap (no DEM), so the comparison can be repeated over seed
 nothing about the feeder itself, only about the searches on a landscape of its kind.
 
     python -m benchmarks.search_synthetic [--seeds 10] [--budget 60] [--population 10 --offspring 5]
+
+``--fig5`` asks another question of the same landscape: the paper's Fig. 5, the median N_t of
+each generation's runs, against the median of the same sets' *true* medians (what fresh seeds
+would give). With one run per set, the first can stay off the target while the population sits
+on it; the second says where the search is.
+
+    python -m benchmarks.search_synthetic --fig5 --algorithms nsga2 --budget 185 \
+        --population 50 --offspring 15
 """
 
 from __future__ import annotations
@@ -70,7 +78,10 @@ def respond(spec) -> SimulationResult:
     )
 
 
-def run(algorithm: str, seed: int, args) -> dict:
+def searched(
+    algorithm: str, seed: int, args, validation: dict | None = None
+) -> tuple[StudyDefinition, MemoryStore, str, float]:
+    """One study on the synthetic feeder, driven to its end: its definition, store, id and CPU s."""
     generations = (args.budget - args.population) // args.offspring
     definition = StudyDefinition.model_validate(
         {
@@ -83,13 +94,35 @@ def run(algorithm: str, seed: int, args) -> dict:
                 "offspring": args.offspring,
                 "generations": generations,
             },
+            **({"validation": validation} if validation is not None else {}),
         }
     )
     store = MemoryStore()
     study_id = store.create_study(definition.model_dump(mode="json"), None)
     started = time.process_time()
     Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
-    cpu = time.process_time() - started
+    return definition, store, study_id, time.process_time() - started
+
+
+def fig5(algorithm: str, seed: int, args) -> list[tuple[float, float]]:
+    """Per generation: (median N_t of its runs, median of its sets' true medians)."""
+    definition, store, study_id, _ = searched(algorithm, seed, args, validation={"seeds": 0})
+    space = ParameterSpace(definition.parameters)
+    rows: dict[int, list[tuple[int, float]]] = {}
+    for record in store.trials(study_id):
+        result = record.result
+        if result is not None and result.ok and record.spec.generation <= definition.ga.generations:
+            truth = true_median(space.genes(record.spec.params))
+            rows.setdefault(record.spec.generation, []).append((result.n_remaining, truth))
+    out = []
+    for generation in sorted(rows):
+        observed, true = zip(*rows[generation], strict=True)
+        out.append((statistics.median(observed), statistics.median(true)))
+    return out
+
+
+def run(algorithm: str, seed: int, args) -> dict:
+    definition, store, study_id, cpu = searched(algorithm, seed, args)
     evaluations = sorted(evaluate(store.trials(study_id), definition, N_ITEMS), key=lambda ev: ev.individual)
     tolerance, target = definition.experiment.tolerance, definition.experiment.target()
     space = ParameterSpace(definition.parameters)
@@ -111,7 +144,20 @@ def main() -> None:
     parser.add_argument("--population", type=int, default=10)
     parser.add_argument("--offspring", type=int, default=5)
     parser.add_argument("--algorithms", default="surrogate,nsga2,random")
+    parser.add_argument("--fig5", action="store_true", help="Median N_t per generation, observed and true.")
     args = parser.parse_args()
+    if args.fig5:
+        for algorithm in args.algorithms.split(","):
+            per_seed = [fig5(algorithm, seed, args) for seed in range(args.seeds)]
+            print(f"{algorithm}: per generation, median N_t of its runs / median of its sets' true medians")
+            for seed, rows in enumerate(per_seed):
+                print(f"  seed {seed}: " + "  ".join(f"{n:g}/{t:g}" for n, t in rows), flush=True)
+            last = [rows[-1] for rows in per_seed]
+            print(
+                f"  last generation, over seeds: runs' median {statistics.median(n for n, _ in last):g}, "
+                f"true medians' median {statistics.median(t for _, t in last):g} (target 4)"
+            )
+        return
     box = np.random.default_rng(0).random((20000, 4))
     share = np.mean([abs(true_median(g) - 4) <= 0.5 for g in box[:2000]])
     print(f"share of the box whose true median N_t is 4: {share:.3f} (2000 uniform points)")
