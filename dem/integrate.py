@@ -50,14 +50,17 @@ def kick(bodies, live, h):
 
 @numba.njit(inline="always", **JIT_FLAGS)
 def drift(bodies, live, lb, dt):
-    """x += dt v and the free rotor over dt; ``lb`` (3,) is scratch for the body-frame L."""
-    pos, vel, quat, angmom, inertia, rot = (
+    """x += dt v and the free rotor over dt, then omega at the new pose (``update_omega``'s
+    formula, in the same pass: the body's rotation and L are still in cache); ``lb`` (3,) is
+    scratch for the body-frame L."""
+    pos, vel, quat, angmom, inertia, rot, omega = (
         bodies.pos,
         bodies.vel,
         bodies.quat,
         bodies.angmom,
         bodies.inertia,
         bodies.rot,
+        bodies.omega,
     )
     for b in live:
         for k in range(3):
@@ -70,6 +73,7 @@ def drift(bodies, live, lb, dt):
                 lb[k] = r[0, k] * angmom[b, 0] + r[1, k] * angmom[b, 1] + r[2, k] * angmom[b, 2]
             free_rotor_step(quat[b], lb, inertia[b], dt)
         to_matrix(quat[b], rot[b])
+        _body_omega(rot, angmom, inertia, omega, b)
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -81,13 +85,18 @@ def update_spheres(spheres, bodies, live_spheres, grid):
     pos, rot = bodies.pos, bodies.rot
     x_build, moved2 = grid.x_build, grid.moved2
     worst = 0.0
-    # A body's spheres are consecutive rows: its pose is read once for all of them.
+    # A body's spheres are consecutive rows: its pose is read once for all of them, and its
+    # largest move written once.
     b_at = -1
+    m2 = 0.0
     px = py = pz = r00 = r01 = r02 = r10 = r11 = r12 = r20 = r21 = r22 = 0.0
     for s in live_spheres:
         b = sbody[s]
         if b != b_at:
+            if b_at >= 0:
+                moved2[b_at] = m2
             b_at = b
+            m2 = moved2[b]
             px, py, pz = pos[b, 0], pos[b, 1], pos[b, 2]
             r00, r01, r02 = rot[b, 0, 0], rot[b, 0, 1], rot[b, 0, 2]
             r10, r11, r12 = rot[b, 1, 0], rot[b, 1, 1], rot[b, 1, 2]
@@ -98,31 +107,33 @@ def update_spheres(spheres, bodies, live_spheres, grid):
         zs = pz + r20 * ox + r21 * oy + r22 * oz
         x[s, 0], x[s, 1], x[s, 2] = xs, ys, zs
         d2 = (xs - x_build[s, 0]) ** 2 + (ys - x_build[s, 1]) ** 2 + (zs - x_build[s, 2]) ** 2
-        if d2 > moved2[b]:
-            moved2[b] = d2
+        if d2 > m2:
+            m2 = d2
         if d2 > worst:
             worst = d2
+    if b_at >= 0:
+        moved2[b_at] = m2
     return worst
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
 def update_omega(bodies, live):
     """omega = R I^-1 R^T L for every active body (L / I when the principal moments are equal)."""
-    rot, angmom, inertia, omega = (
-        bodies.rot,
-        bodies.angmom,
-        bodies.inertia,
-        bodies.omega,
-    )
     for b in live:
-        if inertia[b, 0] == inertia[b, 1] and inertia[b, 1] == inertia[b, 2]:
-            for k in range(3):
-                omega[b, k] = angmom[b, k] / inertia[b, 0]
-            continue
-        r = rot[b]
-        lx = r[0, 0] * angmom[b, 0] + r[1, 0] * angmom[b, 1] + r[2, 0] * angmom[b, 2]
-        ly = r[0, 1] * angmom[b, 0] + r[1, 1] * angmom[b, 1] + r[2, 1] * angmom[b, 2]
-        lz = r[0, 2] * angmom[b, 0] + r[1, 2] * angmom[b, 1] + r[2, 2] * angmom[b, 2]
-        wx, wy, wz = lx / inertia[b, 0], ly / inertia[b, 1], lz / inertia[b, 2]
+        _body_omega(bodies.rot, bodies.angmom, bodies.inertia, bodies.omega, b)
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _body_omega(rot, angmom, inertia, omega, b):
+    """omega of body b: R I^-1 R^T L (L / I when the principal moments are equal)."""
+    if inertia[b, 0] == inertia[b, 1] and inertia[b, 1] == inertia[b, 2]:
         for k in range(3):
-            omega[b, k] = r[k, 0] * wx + r[k, 1] * wy + r[k, 2] * wz
+            omega[b, k] = angmom[b, k] / inertia[b, 0]
+        return
+    r = rot[b]
+    lx = r[0, 0] * angmom[b, 0] + r[1, 0] * angmom[b, 1] + r[2, 0] * angmom[b, 2]
+    ly = r[0, 1] * angmom[b, 0] + r[1, 1] * angmom[b, 1] + r[2, 1] * angmom[b, 2]
+    lz = r[0, 2] * angmom[b, 0] + r[1, 2] * angmom[b, 1] + r[2, 2] * angmom[b, 2]
+    wx, wy, wz = lx / inertia[b, 0], ly / inertia[b, 1], lz / inertia[b, 2]
+    for k in range(3):
+        omega[b, k] = r[k, 0] * wx + r[k, 1] * wy + r[k, 2] * wz

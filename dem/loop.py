@@ -2,8 +2,8 @@
 
 One step (``dem/integrate.py`` for the stages)::
 
-    kick; drift; t += dt; walls to their prescribed position at t (``dem/motion.py``)
-    sphere positions and omega from the bodies' poses
+    kick; drift (and omega at the new pose); t += dt; walls to their prescribed position at t
+    (``dem/motion.py``); sphere positions from the bodies' poses
     neighbour lists rebuilt if any sphere moved more than the Verlet skin allows (``dem/neighbours.py``)
     forces (``dem/forces.py``); kick
     checks: NaN, speed limit, bodies that left the domain (removed and listed)
@@ -173,7 +173,6 @@ def _steps(
             clk[K_T] += dt
             _move_walls(walls, clk[K_T], lists.grid)
             sphere_move2 = update_spheres(spheres, bodies, live_spheres, lists.grid)
-            update_omega(bodies, live)
             sphere_move = math.sqrt(sphere_move2)
             if 2.0 * sphere_move > skin:
                 force_rebuild = True
