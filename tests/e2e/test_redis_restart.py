@@ -80,11 +80,16 @@ def test_a_busy_worker_survives_a_redis_restart_and_its_result_is_not_an_error(t
     )
     executor = RqExecutor.from_url(server.url, "restart")
     try:
-        # Long enough (10 s simulated) that the outage falls inside the run.
-        executor.submit([spec("st-restart-i00000-r00", vibration_time=10.0)])
+        # Long enough (60 s simulated, about 20 s of wall) that the outage falls inside the run:
+        # at 10 s, session 11's engine speed-ups ended it (3.1 s) before Redis went away, and the
+        # restart lost its delivered result. The check before the stop says so if it happens again.
+        executor.submit([spec("st-restart-i00000-r00", vibration_time=60.0)])
         started = lambda: "st-restart-i00000-r00: started" in (tmp_path / "worker.log").read_text()  # noqa: E731
         wait_for(started, 300, "the worker to start the trial")
-        time.sleep(3.0)
+        time.sleep(1.0)
+        assert "st-restart-i00000-r00: ok" not in (tmp_path / "worker.log").read_text(), (
+            "the trial ended before the outage: lengthen its vibration_time"
+        )
 
         server.stop()  # Redis gone mid-trial: the cancellation check and delivery must wait
         time.sleep(3.5)
