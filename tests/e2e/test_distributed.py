@@ -265,10 +265,11 @@ def test_a_worker_stopped_with_sigterm_finishes_its_trial_first(cluster):
 
 
 def test_a_second_sigterm_stops_the_worker_at_once_and_the_trial_runs_elsewhere(cluster):
-    # Trials of 10 simulated seconds: longer than the two signals take (about 2 s) even on a
-    # fast machine, so the second one reaches a trial still running.
+    # Trials of 30 simulated seconds (about 9 s of wall): longer than the two signals take (about
+    # 2 s) even on a fast machine, so the second one reaches a trial still running (10 s took 3.1 s
+    # of wall after session 11's engine speed-ups, too close).
     definition = tiny_study("second-sigterm", population=2, offspring=1, generations=1)
-    definition["scenario"]["stages"]["vibration_time"] = 10.0
+    definition["scenario"]["stages"]["vibration_time"] = 30.0
     cluster.start_serve()
     worker = cluster.start_worker("w1")
     study_id = cluster.create_study(definition)
@@ -285,7 +286,7 @@ def test_a_second_sigterm_stops_the_worker_at_once_and_the_trial_runs_elsewhere(
     exit_code = worker.wait(30)
     stopped_after = time.monotonic() - started
     cluster.start_worker("w2")
-    study = cluster.wait_until_done(study_id, timeout=600)  # three 10 s trials on a loaded machine
+    study = cluster.wait_until_done(study_id, timeout=600)  # three 30 s trials on a loaded machine
     trial = {t["id"]: t for t in cluster.trials(study_id)}[running]
 
     assert stopped_after < 5.0
