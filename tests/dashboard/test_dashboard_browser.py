@@ -686,3 +686,69 @@ def test_a_study_with_mu_wall_shows_it_in_its_plots_tables_and_trials_and_one_wi
     assert js_fmt(trial.params["mu_wall"]) in trial_page
     assert "μ_wall (–)" not in old_header and "μ (–)" in old_header
     assert page.errors == []
+
+
+def _study_with_a_generation_in_progress(store, owner: str) -> tuple[str, list[str], list[str]]:
+    """Generation 0 of 10 sets ranked, generation 1 of 4 sets with two finished but not ranked
+    and two queued, no failed run: how a study looks while its second batch runs."""
+    definition = parse_study({
+        "name": "generation-in-progress", "scenario": {},
+        "experiment": {"measured": [0, 2, 3, 3, 4, 4, 5, 8, 12, 16]},
+        "ga": {"population": 10, "offspring": 4, "generations": 3}, "validation": {"seeds": 0},
+        "objective_time": "wall",
+    })  # fmt: skip
+    study_id = store.create_study(definition.model_dump(mode="json"), owner=owner)
+    store.set_status(study_id, StudyStatus.RUNNING)
+    specs = [
+        TrialSpec(
+            trial_id=trial_id(study_id, i, 0), study_id=study_id, individual=i, generation=0 if i < 10 else 1,
+            replicate=0, seed=i, params={"E": 10 ** (5 + 0.3 * i), "nu": 0.3, "e": 0.1 + 0.05 * i, "mu": 0.5},
+            scenario={},
+        )
+        for i in range(14)
+    ]
+    store.add_trials(specs)
+    objectives = {}
+    for spec in specs[:12]:
+        n_remaining = spec.individual % 7
+        result = SimulationResult(
+            status=SimulationStatus.OK, n_items=30, n_remaining=n_remaining, sim_time=65.0,
+            wall_time_s=10.0 + spec.individual, cost=1e6 * (1 + spec.individual), params=spec.params,
+            seed=spec.seed,
+            discharge_times=[30.0] * (30 - n_remaining) + [None] * n_remaining,
+        )
+        store.record_result(TrialOutcome(spec.trial_id, result))
+        objectives[spec.trial_id] = (abs(n_remaining - 4.0), result.wall_time_s)
+    ranked = [spec.trial_id for spec in specs[:10]]
+    store.save_generation(study_id, 1, b"synthetic", [], None, objectives={t: objectives[t] for t in ranked})
+    return study_id, ranked, [spec.trial_id for spec in specs[10:]]
+
+
+def test_a_batch_in_progress_is_drawn_without_f1_colour_and_no_failures_are_noted_above_the_points(
+    page, dashboard
+):
+    study_id, ranked, unranked = _study_with_a_generation_in_progress(dashboard.store, owner="alice")
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_function(PLOTTED, arg="generation-plot")
+    page.wait_for_function("() => document.getElementById('parameter-plot')?.data?.length > 0")
+
+    panels = page.evaluate(
+        """() => document.getElementById('parameter-plot').data.filter((t) => t.type === 'scatter')
+             .map((t) => ({name: t.name, ids: (t.customdata || []).map((c) => c[0]),
+                           colours: Array.isArray(t.marker.color) ? t.marker.color : [],
+                           showscale: !!t.marker.showscale}))"""
+    )
+    coloured = [p for p in panels if p["name"] == "trials"]
+    waiting = [p for p in panels if p["name"].startswith("no f1 yet")]
+    assert len(coloured) == len(waiting) == 4  # one of each per parameter panel
+    for trace in coloured:
+        assert sorted(trace["ids"]) == sorted(ranked)
+        assert all(isinstance(c, int | float) for c in trace["colours"])  # an f1 for every coloured point
+    assert all(sorted(trace["ids"]) == sorted(unranked) for trace in waiting)
+
+    note = page.locator("#generation-plot .annotation").first
+    panel_a = page.locator('#generation-plot .nsewdrag[data-subplot="xy"]').first
+    assert "no failed runs: every run measured" in note.text_content()
+    assert note.bounding_box()["y"] + note.bounding_box()["height"] <= panel_a.bounding_box()["y"] + 1
+    assert page.errors == []
+    save_screenshot(page, "dashboard-batch-in-progress")

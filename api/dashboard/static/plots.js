@@ -11,6 +11,7 @@ const INK = "#1b1f24";
 const GRID = "#e3e6ea";
 const MEDIAN = "#d55e00"; // Okabe-Ito vermillion
 const TARGET = "#0072b2"; // Okabe-Ito blue
+const STRIP_TOP = 0.93; // top of Fig. 5's failed-runs strip, in the figure's fraction
 
 export function baseLayout(extra = {}) {
   return {
@@ -307,12 +308,14 @@ export function generationFigure(trials, responses, maxGeneration) {
       domain: [0, 1], range: fromZero(done, (t) => t.wall_time_s),
     }),
     xaxis3: genAxis("", [0, 0.46]),
-    yaxis3: axis("failed runs", { domain: [0.8, 0.93], rangemode: "tozero", nticks: 3, title: { text: "failed<br>runs", font: { size: 11 } } }),
+    yaxis3: axis("failed runs", { domain: [0.8, STRIP_TOP], rangemode: "tozero", nticks: 3, title: { text: "failed<br>runs", font: { size: 11 } } }),
     barmode: "stack",
+    // In paper coordinates at the strip's top: without failed runs the strip has no trace, so
+    // plotly draws no x3/y3 subplot and a reference to its domain put the note among the points.
     annotations: [{
-      xref: "x3 domain", yref: "y3 domain", x: 0, y: 1, xanchor: "left", yanchor: "bottom", showarrow: false,
+      xref: "paper", yref: "paper", x: 0, y: STRIP_TOP, xanchor: "left", yanchor: "bottom", showarrow: false,
       text: counts.total ? `${counts.text} — ${none}, ${responses.length === 1 ? "not in (a) or (b)" : "in no panel"}`
-        : `${counts.text}: every run measured ${responses.length === 1 ? responseHtml(responses[0]) : "every response"}`,
+        : `no failed runs: every run measured ${responses.length === 1 ? responseHtml(responses[0]) : "every response"}`,
       font: { size: 12, color: INK },
     }],
     hovermode: "closest",
@@ -401,7 +404,11 @@ export function parameterFigure(trials, bounds, maxGeneration, responses, f1unit
   // f1 only where it is a measurement, failed individuals are grey crosses apart from the scale.
   const failures = individualFailures(trials);
   const failedOf = (t) => t.state === "done" && failures.has(t.individual);
-  const done = all.filter((t) => !failedOf(t));
+  const proposed = all.filter((t) => !failedOf(t));
+  // Coloured only where f1 is known: a queued, running or not yet ranked trial has none, and
+  // colouring it would put it on the scale (as f1 0, and the scale at -0.5..0.5 when none has one).
+  const done = proposed.filter((t) => Number.isFinite(t.f1));
+  const unranked = proposed.filter((t) => !Number.isFinite(t.f1));
   const failed = all.filter(failedOf);
   const gens = done.map((t) => t.generation + jitter(t));
   const data = [];
@@ -426,8 +433,14 @@ export function parameterFigure(trials, bounds, maxGeneration, responses, f1unit
         x: gens, y: done.map((t) => t.params[p.key]), xaxis: "x" + suffix, yaxis: "y" + suffix,
         customdata: customdata(done, responses), hovertemplate: HOVER,
         marker: { size: 6, color: done.map((t) => t.f1), colorscale: "Cividis", reversescale: true,
-          cmin: 0, showscale: i === 0, line: { width: 0.6, color: "#3b3b3b" },
+          cmin: 0, showscale: i === 0 && done.length > 0, line: { width: 0.6, color: "#3b3b3b" },
           colorbar: { title: { text: `f1 (${unitOf({ unit: f1unit })})` }, thickness: 12, len: 0.8 } },
+      });
+      data.push({
+        type: "scatter", mode: "markers", name: "no f1 yet (queued, running or not ranked)", showlegend: i === 0,
+        x: unranked.map((t) => t.generation + jitter(t)), y: unranked.map((t) => t.params[p.key]),
+        xaxis: "x" + suffix, yaxis: "y" + suffix, customdata: customdata(unranked, responses), hovertemplate: HOVER,
+        marker: { size: 6, symbol: "circle-open", color: "#8c959f", line: { width: 1 } },
       });
       data.push({
         type: "scatter", mode: "markers", name: `failed (${noneHtml(responses)})`, showlegend: i === 0,
