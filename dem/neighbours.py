@@ -502,27 +502,38 @@ def _adopt_wall_pairs(wall_pairs, n_wp):
 _GAP_ROUNDING = 1e-8
 
 
+@numba.njit(inline="always", **JIT_FLAGS)
+def _run_end(p, n, owner, first, second):
+    """End of the run of listed pairs from p whose rows ``first`` and ``second`` have the same
+    owners as p's (``owner``: the spheres' bodies): a body pair's sphere pairs, or, with ``first``
+    and ``second`` both the sphere, a body's sphere-facet pairs."""
+    a, b = owner[first[p]], owner[second[p]]
+    q = p + 1
+    while q < n and owner[first[q]] == a and owner[second[q]] == b:
+        q += 1
+    return q
+
+
 @numba.njit(**JIT_FLAGS)
 def _sphere_pair_gaps(pairs, spheres):
     """The groups of several pairs (``walk``), each one's pairs ordered by their gap
     |x_i - x_j| - r_i - r_j at the build (-inf for a pair holding a spring), and every pair's
     overlap reset to -1 (apart): the force pass visits such a group's pairs only as far as its
     bodies' moves since the build could have closed a gap (``dem/forces.py``)."""
-    pp_i, pp_j, pp_hist, pp_group = pairs.i, pairs.j, pairs.hist, pairs.group
+    pp_i, pp_j, pp_hist = pairs.i, pairs.j, pairs.hist
     walk, by_gap, gap = pairs.walk, pairs.by_gap, pairs.gap
     x, radius = spheres.x, spheres.radius
     n_pp = pairs.count[N_PAIRS]
+    for p in range(n_pp):
+        pairs.delta[p] = -1.0
     n_walks = 0
     p_first = 0
-    for p in range(n_pp + 1):
-        if p < n_pp:
-            pairs.delta[p] = -1.0
-            if p == 0 or pp_group[p] == pp_group[p - 1]:
-                continue
-        if p - p_first > 1:
-            walk[n_walks, 0], walk[n_walks, 1] = p_first, p
+    while p_first < n_pp:
+        p_end = _run_end(p_first, n_pp, spheres.body, pp_i, pp_j)
+        if p_end - p_first > 1:
+            walk[n_walks, 0], walk[n_walks, 1] = p_first, p_end
             n_walks += 1
-            for k in range(p_first, p):
+            for k in range(p_first, p_end):
                 i, j = pp_i[k], pp_j[k]
                 rs = radius[i] + radius[j]
                 d = np.sqrt((x[i, 0] - x[j, 0]) ** 2 + (x[i, 1] - x[j, 1]) ** 2 + (x[i, 2] - x[j, 2]) ** 2)
@@ -535,7 +546,7 @@ def _sphere_pair_gaps(pairs, spheres):
                     gap[at], by_gap[at] = gap[at - 1], by_gap[at - 1]
                     at -= 1
                 gap[at], by_gap[at] = g, k
-        p_first = p
+        p_first = p_end
     walk[n_walks, 0], walk[n_walks, 1] = n_pp, n_pp
     pairs.count[N_WALKS] = n_walks
 
@@ -549,21 +560,20 @@ def _wall_pair_gaps(wall_pairs, spheres, walls):
     (``dem/forces.py``). A facet moves with its wall, as a translation."""
     wp_i, wp_f, wp_hist = wall_pairs.i, wall_pairs.f, wall_pairs.hist
     walk, gap = wall_pairs.walk, wall_pairs.gap
-    x, radius, sbody = spheres.x, spheres.radius, spheres.body
+    x, radius = spheres.x, spheres.radius
     facets, wall_disp = walls.facets, walls.disp
     n_wp = wall_pairs.count[N_PAIRS]
+    for p in range(n_wp):
+        wall_pairs.delta[p] = -1.0
+        wall_pairs.keep[p] = False
     n_walks = 0
     p_first = 0
-    for p in range(n_wp + 1):
-        if p < n_wp:
-            wall_pairs.delta[p] = -1.0
-            wall_pairs.keep[p] = False
-            if p == 0 or sbody[wp_i[p]] == sbody[wp_i[p - 1]]:
-                continue
-        if p > p_first and wp_i[p_first] != wp_i[p - 1]:
-            walk[n_walks, 0], walk[n_walks, 1] = p_first, p
+    while p_first < n_wp:
+        p_end = _run_end(p_first, n_wp, spheres.body, wp_i, wp_i)
+        if wp_i[p_first] != wp_i[p_end - 1]:
+            walk[n_walks, 0], walk[n_walks, 1] = p_first, p_end
             n_walks += 1
-            for k in range(p_first, p):
+            for k in range(p_first, p_end):
                 i, f = wp_i[k], wp_f[k]
                 w = facets.wall[f]
                 d2, _, _, _, _ = closest_point_on_facet(
@@ -573,6 +583,6 @@ def _wall_pair_gaps(wall_pairs, spheres, walls):
                 if wp_hist[k, 0] != 0.0 or wp_hist[k, 1] != 0.0 or wp_hist[k, 2] != 0.0:
                     g = -np.inf
                 gap[k] = g
-        p_first = p
+        p_first = p_end
     walk[n_walks, 0], walk[n_walks, 1] = n_wp, n_wp
     wall_pairs.count[N_WALKS] = n_walks
