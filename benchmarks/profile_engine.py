@@ -175,8 +175,8 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
         for k, v in saved.items():
             getattr(bodies, k)[...] = v
 
-    lb = np.zeros(3)
-    live, live_spheres = live_rows(bodies.active, spheres.body)
+    lb = np.zeros((len(bodies.pos), 3))
+    live, live_spheres, rotors = live_rows(bodies.active, spheres.body, bodies.inertia)
     rows = [
         ("compute_forces", lambda: compute_forces(bodies, spheres, mat, walls, lists, grav, lim, 0.0)),
         (
@@ -206,7 +206,7 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
         ]
     rows += [
         ("kick", lambda: kick(bodies, live, 0.5 * dt)),
-        ("drift (restored after)", lambda: (drift(bodies, live, lb, dt), restore())),
+        ("drift (restored after)", lambda: (drift(bodies, live, rotors, lb, dt), restore())),
         (
             "update_spheres + omega",
             lambda: (

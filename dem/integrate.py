@@ -1,5 +1,5 @@
 """Time integration of the rigid bodies: velocity Verlet as in LIGGGHTS, with the free-rotor
-splitting for rotation (``dem.quaternion.free_rotor_step``; a body with equal principal moments
+splitting for rotation (``dem.quaternion.free_rotor_steps``; a body with equal principal moments
 turns exactly about L, ``isotropic_rotor_step``)::
 
     kick:   v += dt/2 F/m;  L += dt/2 T            (L: world-frame angular momentum)
@@ -22,13 +22,15 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS
-from dem.quaternion import free_rotor_step, isotropic_rotor_step, to_matrix
+from dem.quaternion import free_rotor_steps, isotropic_rotor_step, to_matrix
 
 
 @numba.njit(**JIT_FLAGS)
-def live_rows(active, sbody):
-    """(rows of the active bodies, rows of their spheres), ascending."""
-    return np.nonzero(active)[0], np.nonzero(active[sbody])[0]
+def live_rows(active, sbody, inertia):
+    """(rows of the active bodies, rows of their spheres, rows of the active bodies whose principal
+    moments are not all equal: the free rotors), ascending."""
+    isotropic = (inertia[:, 0] == inertia[:, 1]) & (inertia[:, 1] == inertia[:, 2])
+    return np.nonzero(active)[0], np.nonzero(active[sbody])[0], np.nonzero(active & ~isotropic)[0]
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -49,10 +51,11 @@ def kick(bodies, live, h):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def drift(bodies, live, lb, dt):
-    """x += dt v and the free rotor over dt, then omega at the new pose (``update_omega``'s
-    formula, in the same pass: the body's rotation and L are still in cache); ``lb`` (3,) is
-    scratch for the body-frame L."""
+def drift(bodies, live, rotors, lb, dt):
+    """x += dt v and the rotation over dt, then omega at the new pose (``update_omega``'s
+    formula, in the same pass as a body's rotation where it can: its rotation and L are still in
+    cache). The free rotors (``rotors``, from ``live_rows``) turn all together, turn by turn
+    (``dem.quaternion.free_rotor_steps``); ``lb`` (bodies, 3) is scratch for their body-frame L."""
     pos, vel, quat, angmom, inertia, rot, omega = (
         bodies.pos,
         bodies.vel,
@@ -67,11 +70,14 @@ def drift(bodies, live, lb, dt):
             pos[b, k] += dt * vel[b, k]
         if inertia[b, 0] == inertia[b, 1] and inertia[b, 1] == inertia[b, 2]:
             isotropic_rotor_step(quat[b], angmom[b], inertia[b, 0], dt)
-        else:
-            r = rot[b]
-            for k in range(3):
-                lb[k] = r[0, k] * angmom[b, 0] + r[1, k] * angmom[b, 1] + r[2, k] * angmom[b, 2]
-            free_rotor_step(quat[b], lb, inertia[b], dt)
+            to_matrix(quat[b], rot[b])
+            _body_omega(rot, angmom, inertia, omega, b)
+    for b in rotors:
+        r = rot[b]
+        for k in range(3):
+            lb[b, k] = r[0, k] * angmom[b, 0] + r[1, k] * angmom[b, 1] + r[2, k] * angmom[b, 2]
+    free_rotor_steps(quat, lb, inertia, rotors, dt)
+    for b in rotors:
         to_matrix(quat[b], rot[b])
         _body_omega(rot, angmom, inertia, omega, b)
 

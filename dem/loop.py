@@ -109,9 +109,9 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
     drift of a step for lack of list capacity; finish that step first.
     """
     clk, cnt = run.clock, run.counters
-    lb = np.zeros(3)
+    lb = np.zeros((bodies.pos.shape[0], 3))
     cnt[C_STEPS] = 0
-    live, live_spheres = live_rows(bodies.active, spheres.body)
+    live, live_spheres, rotors = live_rows(bodies.active, spheres.body, bodies.inertia)
     force_rebuild = need_forces or resume
     if need_forces and not resume:
         _move_walls(walls, clk[K_T], lists.grid)
@@ -136,6 +136,7 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
             force_rebuild,
             live,
             live_spheres,
+            rotors,
             lb,
             run,
             settings,
@@ -146,7 +147,7 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
         )
         if status != _BODIES_LEFT:
             break
-        live, live_spheres = live_rows(bodies.active, spheres.body)
+        live, live_spheres, rotors = live_rows(bodies.active, spheres.body, bodies.inertia)
         resume = False
         force_rebuild = True
     if status == STATUS_OK:
@@ -156,7 +157,20 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
 
 @numba.njit(**STEP_FLAGS)
 def _steps(
-    n_steps, dt, resume, force_rebuild, live, live_spheres, lb, run, settings, bodies, spheres, walls, lists
+    n_steps,
+    dt,
+    resume,
+    force_rebuild,
+    live,
+    live_spheres,
+    rotors,
+    lb,
+    run,
+    settings,
+    bodies,
+    spheres,
+    walls,
+    lists,
 ):
     """The steps of ``run_steps`` from step ``counters[C_STEPS]`` until ``n_steps`` (``STATUS_OK``),
     an unstable state or a full list (their status), or a step after which bodies left the domain
@@ -169,7 +183,7 @@ def _steps(
     while step < n_steps:
         if not resume:
             kick(bodies, live, half)
-            drift(bodies, live, lb, dt)
+            drift(bodies, live, rotors, lb, dt)
             clk[K_T] += dt
             _move_walls(walls, clk[K_T], lists.grid)
             sphere_move2 = update_spheres(spheres, bodies, live_spheres, lists.grid)
