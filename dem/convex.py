@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from dem.conf import JIT_FLAGS
+from dem.conf import JIT_FLAGS, STEP_FLAGS
 
 MAX_FEATURE = 128  # most vertices of a core (the scratch holds every one's projection)
 SIMPLEX = 7  # a pair's cached GJK simplex: its size, then the vertex rows (of a, of b) of each point
@@ -169,7 +169,7 @@ def _closest_segment(s, lam):
     return 2
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _closest_triangle(s, lam):
     """Closest point to the origin of triangle rows 0-2 (Ericson 5.1.5 regions)."""
     abx, aby, abz = s[1, 0] - s[0, 0], s[1, 1] - s[0, 1], s[1, 2] - s[0, 2]
@@ -218,7 +218,7 @@ def _closest_triangle(s, lam):
     return 3
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _closest_tetrahedron(s, lam):
     """Closest point to the origin of tetrahedron rows 0-3; 4 (and lam unset) if it holds the origin.
     Scratch in the caller's arrays (no allocation per call): s rows 4-6 the best face, 7-9 the
@@ -268,7 +268,7 @@ def _closest_tetrahedron(s, lam):
     return best_k
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _flat(s):
     """Whether simplex rows 0-3 span (almost) no volume."""
     ax, ay, az = s[1, 0] - s[0, 0], s[1, 1] - s[0, 1], s[1, 2] - s[0, 2]
@@ -290,7 +290,7 @@ def _put(s, r, va, a, ka, vb, b, kb):
     s[r, 9], s[r, 10] = ka, kb
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _warm_start(va, a, vb, b, simplex, s, lam):
     """The cached simplex (``SIMPLEX`` ints) as the starting simplex in s, reduced to its point
     closest to the origin (weights in lam); returns its size, 0 if the cache holds none or rows
@@ -451,7 +451,7 @@ def _copy_row(dst, i, src, j):
     dst[i, 0], dst[i, 1], dst[i, 2] = src[j, 0], src[j, 1], src[j, 2]
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _hull2(pts, m, out, eps):
     """Counter-clockwise convex hull of pts[:m] (Andrew's monotone chain; column 2 rides along)
     into out; returns its size. Points closer than eps collapse; collinear points are dropped,
@@ -481,7 +481,7 @@ def _hull2(pts, m, out, eps):
     return h
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _clip(poly, m, clip, c, out):
     """Sutherland-Hodgman: poly[:m] (convex, ccw, or a segment/point) clipped by the ccw convex
     polygon clip[:c], poly's depth (column 2) interpolated; result in poly (out is scratch);
@@ -522,7 +522,7 @@ def _clip(poly, m, clip, c, out):
     return m
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _segment_load(x0, y0, p0, x1, y1, p1):
     """(load, cx, cy) of a segment under a linear line load p (uniform if p vanishes)."""
     length = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
@@ -533,7 +533,7 @@ def _segment_load(x0, y0, p0, x1, y1, p1):
     return load, (x0 * (2 * p0 + p1) + x1 * (p0 + 2 * p1)) * k, (y0 * (2 * p0 + p1) + y1 * (p0 + 2 * p1)) * k
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _pressure_centre(poly, m):
     """(area load, line load, cx, cy, suu, suw, sww) of polygon poly[:m] under the pressure that
     varies linearly between its vertices' depths (column 2): the loads and the centre of pressure
@@ -597,7 +597,7 @@ def _pressure_centre(poly, m):
     return 0.0, load, cx, cy, s_uu, s_uw, s_ww
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def plane_basis(nx, ny, nz):
     """Unit vectors u, w with (u, w, n) right-handed: the patch's coordinates."""
     if abs(nx) < 0.9:
@@ -609,7 +609,7 @@ def plane_basis(nx, ny, nz):
     return ux, uy, uz, ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def feature_hulls(va, a, vb, b, d, n, tol, work):
     """Projected hulls of the vertices of cores ``a`` and ``b`` (of the vertex arrays va, vb)
     within tol of their supporting planes across the unit normal n (3-tuple, B to A) of cores a
@@ -623,12 +623,19 @@ def feature_hulls(va, a, vb, b, d, n, tol, work):
     return feature_hulls_again(a.count, b.count, d, tol, work)
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def feature_hulls_again(na, nb, d, tol, work):
     """``feature_hulls`` for another tol, from the projections of the na and nb vertices that the
     last call left in work[4] and work[5] (same cores, same n): no second pass over the cores."""
     na = _feature(work[4], na, tol, work[0])
     nb = _feature(work[5], nb, tol, work[1])
+    return _hulls(na, nb, d, tol, work)
+
+
+@numba.njit(**STEP_FLAGS)
+def _hulls(na, nb, d, tol, work):
+    """The hulls of the features (``_feature``) of na points in work[0] and nb in work[1], in
+    place; returns their sizes and the length under which points merge."""
     eps = 1e-9 * d + 1e-12 * (tol + 1.0)
     ha = _hull2(work[0], na, work[2], eps)
     for k in range(ha):
@@ -639,8 +646,8 @@ def feature_hulls_again(na, nb, d, tol, work):
     return ha, hb, eps
 
 
-@numba.njit(**JIT_FLAGS)
-def contact_patch(va, a, vb, b, p_a, p_b, tol, work, again=False):
+@numba.njit(**STEP_FLAGS)
+def contact_patch(va, a, vb, b, p_a, p_b, tol, work):
     """Centre of the contact patch of two separated convex shapes ``a`` and ``b`` (``Core``s of
     the vertex arrays va, vb) whose closest points (from ``gjk_distance``, 3-tuples) are p_a and
     p_b, for the overlap ``tol`` of their rounded surfaces: returns ``(area_load, line_load, cx,
@@ -652,9 +659,8 @@ def contact_patch(va, a, vb, b, p_a, p_b, tol, work, again=False):
     vertex is its depth (tol minus its height), linear in between (a Winkler foundation), and c
     is the centre of that pressure: the centroid when two faces are parallel, moving continuously
     to the lower edge as a face tilts by tol over its width, the closest point once one vertex or
-    edge alone is within tol. The loads weight patches of several coplanar triangles. ``again``:
-    the last ``feature_hulls`` in work was for these cores and closest points (as
-    ``dem.crown.crowned_contact``'s), so their projections are reused."""
+    edge alone is within tol. The loads weight patches of several coplanar triangles
+    (``patch_moments``: the moments alone, from the crowned contact's projections)."""
     ax, ay, az = p_a
     bx, by, bz = p_b
     nx, ny, nz = ax - bx, ay - by, az - bz
@@ -664,31 +670,62 @@ def contact_patch(va, a, vb, b, p_a, p_b, tol, work, again=False):
         return 0.0, 0.0, mx, my, mz, 0.0, 0.0, 0.0
     nx, ny, nz = nx / d, ny / d, nz / d
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
-    if again:
-        ha, hb, eps = feature_hulls_again(a.count, b.count, d, tol, work)
-    else:
-        ha, hb, eps = feature_hulls(va, a, vb, b, d, (nx, ny, nz), tol, work)
-    # Clip the lower-dimensional feature by the other (a polygon clips anything).
-    if hb >= 3:
-        m = _clip(work[0], ha, work[1], hb, work[3])
-        poly = work[0]
-    elif ha >= 3:
-        m = _clip(work[1], hb, work[0], ha, work[3])
-        poly = work[1]
-    else:
-        m = 0
-        poly = work[0]
-        if ha == 2 and hb == 2:
-            m = _parallel_segments(work[0], work[1], eps)
+    ha, hb, eps = feature_hulls(va, a, vb, b, d, (nx, ny, nz), tol, work)
+    m = _overlap(ha, hb, eps, work)
     if m == 0:  # crossing edges, or features apart in projection: the closest points
         return 0.0, 0.0, mx, my, mz, 0.0, 0.0, 0.0
-    area_load, line_load, cu, cw, s_uu, s_uw, s_ww = _pressure_centre(poly, m)
+    area_load, line_load, cu, cw, s_uu, s_uw, s_ww = _pressure_centre(_overlap_row(ha, hb, work), m)
     h = mx * nx + my * ny + mz * nz
     cx, cy, cz = h * nx + cu * ux + cw * wx, h * ny + cu * uy + cw * wy, h * nz + cu * uz + cw * wz
     return area_load, line_load, cx, cy, cz, s_uu, s_uw, s_ww
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
+def _overlap(ha, hb, eps, work):
+    """The overlap in projection of the hulls work[0][:ha] and work[1][:hb], written where
+    ``_overlap_row`` says: the lower-dimensional feature clipped by the other (a polygon clips
+    anything), two parallel edges' common part, or nothing (crossing edges, features apart);
+    returns its size (0: nothing)."""
+    if hb >= 3:
+        return _clip(work[0], ha, work[1], hb, work[3])
+    if ha >= 3:
+        return _clip(work[1], hb, work[0], ha, work[3])
+    if ha == 2 and hb == 2:
+        return _parallel_segments(work[0], work[1], eps)
+    return 0
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _overlap_row(ha, hb, work):
+    """Where ``_overlap`` leaves the overlap: work[1] when only A's hull is a polygon."""
+    return work[1] if ha >= 3 and hb < 3 else work[0]
+
+
+@numba.njit(**STEP_FLAGS)
+def patch_moments(na, nb, p_a, p_b, tol, work):
+    """``contact_patch``'s second moments ``(s_uu, s_uw, s_ww)`` for cores of na and nb vertices
+    whose closest points p_a, p_b were those of the last ``feature_hulls`` in work (as
+    ``dem.crown.crowned_contact``'s), from the projections it left: no pass over the cores. Where
+    one core has a single vertex within tol, the patch is that point or nothing, with no moments
+    either way, so the other's hull and the clipping are skipped (a corner on a face of 24
+    outline vertices: about a third of a resting pile's contacts)."""
+    nx, ny, nz = p_a[0] - p_b[0], p_a[1] - p_b[1], p_a[2] - p_b[2]
+    d = math.sqrt(nx * nx + ny * ny + nz * nz)  # as contact_patch's, to the bit
+    if d == 0.0:
+        return 0.0, 0.0, 0.0
+    na = _feature(work[4], na, tol, work[0])
+    nb = _feature(work[5], nb, tol, work[1])
+    if na == 1 or nb == 1:
+        return 0.0, 0.0, 0.0
+    ha, hb, eps = _hulls(na, nb, d, tol, work)
+    m = _overlap(ha, hb, eps, work)
+    if m == 0:
+        return 0.0, 0.0, 0.0
+    _, _, _, _, s_uu, s_uw, s_ww = _pressure_centre(_overlap_row(ha, hb, work), m)
+    return s_uu, s_uw, s_ww
+
+
+@numba.njit(**STEP_FLAGS)
 def _parallel_segments(s, t, tol):
     """Overlap of two projected segments if they are collinear (parallel edges): written to s,
     returns 2; else 0 (crossing edges have a unique closest point)."""

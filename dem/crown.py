@@ -31,7 +31,7 @@ import math
 
 import numba
 
-from dem.conf import JIT_FLAGS
+from dem.conf import JIT_FLAGS, STEP_FLAGS
 from dem.convex import _clip, _copy_row, _parallel_segments, feature_hulls, plane_basis
 
 
@@ -135,7 +135,7 @@ def _holds(poly, m, u, w):
     return True
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _minimise(poly, m, c):
     """(u, w) minimising the convex quadratic ``_gap`` on the convex polygon (segment, point)
     poly[:m], counter-clockwise."""
@@ -189,7 +189,7 @@ def _along(seg, u, w, eps):
     return eu, ew, eps < t < length - eps
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _tilt(hull_a, ha, hull_b, hb, u, w, c, eps):
     """Tangential part tau of the direction x* - y* of the exact minimiser (KKT): where y* can
     move inside a face of B, tau = grad phi_b there; inside a face of A, tau = -grad phi_a; along
@@ -231,7 +231,7 @@ def _tilt(hull_a, ha, hull_b, hb, u, w, c, eps):
     return 0.0, 0.0
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def crowned_contact(va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work):
     """Crowned distance D of two separated convex shapes ``a`` and ``b`` (``dem.convex.Core``s of
     the vertex arrays va, vb) whose closest points (``gjk_distance``, 3-tuples) are p_a and p_b,

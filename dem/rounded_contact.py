@@ -44,8 +44,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from dem.conf import JIT_FLAGS
-from dem.convex import Core, contact_patch, gjk_distance, placed, plane_basis, support
+from dem.conf import JIT_FLAGS, STEP_FLAGS
+from dem.convex import Core, contact_patch, gjk_distance, patch_moments, placed, plane_basis, support
 from dem.crown import crowned_contact
 from dem.facets import closest_point_on_triangle
 
@@ -79,13 +79,13 @@ def box_extent(x, half, rot, i, b, nx, ny, nz):
     return c - e, c + e
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _triangle(facet, t):
     """Triangle t of the wall triangle array as a placed core."""
     return Core(3 * t, 3, IDENTITY, facet.disp)
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _extent(verts, core, nx, ny, nz):
     """(min, max) of the placed vertices' projections on n, and the lowest vertex (3-tuple): the
     support queries along -n and n in one pass over the vertices, with the same vertices (the
@@ -108,7 +108,7 @@ def _extent(verts, core, nx, ny, nz):
     return lx * nx + ly * ny + lz * nz, hx * nx + hy * ny + hz * nz, (lx, ly, lz)
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _segment_meets_box(p, q, box):
     """Whether the segment p-q (2-tuples) meets the box (u_min, u_max, w_min, w_max)."""
     u0, u1, w0, w1 = box
@@ -123,7 +123,7 @@ def _segment_meets_box(p, q, box):
     return above and below
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _shared(tri, facet, t, c):
     """Whether edge c (corners c, c + 1) of triangle t is an edge of another triangle of the
     facet: an inner edge of the facet, not its boundary."""
@@ -142,7 +142,7 @@ def _shared(tri, facet, t, c):
     return False
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _footprint(va, a, facet, reach, pts):
     """The box (u_min, u_max, w_min, w_max), in ``plane_basis`` of the facet's normal and the
     wall's reference position, of the vertices of core ``a`` at most ``reach`` above its lowest
@@ -177,7 +177,7 @@ def _footprint(va, a, facet, reach, pts):
     return (u0 - margin, u1 + margin, w0 - margin, w1 + margin), m
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _line_clears(p, q, pts, m, margin):
     """Whether the points pts[:m] (u, w) all lie on one side of the line through p and q
     (2-tuples), further than margin: then the segment p-q misses their convex hull."""
@@ -190,13 +190,13 @@ def _line_clears(p, q, pts, m, margin):
     return lo > margin or hi < -margin
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _in_plane(tri, k, ux, uy, uz, wx, wy, wz):
     """Row k of the triangle array in the plane's coordinates (u, w)."""
     return tri[k, 0] * ux + tri[k, 1] * uy + tri[k, 2] * uz, tri[k, 0] * wx + tri[k, 1] * wy + tri[k, 2] * wz
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _inside_facet(tri, facet, box, pts, m):
     """Whether the convex hull of the footprint (``_footprint``: its box, and its m points in pts)
     lies inside the facet (triangles of ``tri`` at the reference position): no boundary edge of
@@ -226,7 +226,7 @@ def _inside_facet(tri, facet, box, pts, m):
     return on_facet
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work):
     """``facet_geometry`` where the features of core ``a`` that can touch lie over the inside of
     the facet: its contact is that with the facet's plane, n the facet's normal, d the height of
@@ -257,7 +257,7 @@ def _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work):
     delta = ra - crowned
     if delta <= 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
-    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, big, b, p_a, p_b, delta, work, True)
+    s_uu, s_uw, s_ww = patch_moments(a.count, b.count, p_a, p_b, delta, work)
     cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww, True
 
@@ -285,7 +285,7 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
     return _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work)
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
     """``pair_geometry`` past the cached axis, which is inlined in its callers: most listed pairs
     end at that test, and each array passed to a compiled call costs an atomic reference count
@@ -305,7 +305,7 @@ def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, w
     delta = reach - crowned
     if delta <= 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    _, _, _, _, _, s_uu, s_uw, s_ww = contact_patch(va, a, vb, b, p_a, p_b, delta, work, True)
+    s_uu, s_uw, s_ww = patch_moments(a.count, b.count, p_a, p_b, delta, work)
     cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww
 
