@@ -492,10 +492,21 @@ def _hull2(pts, m, out, eps):
 def _clip(poly, m, clip, c, out):
     """Sutherland-Hodgman: poly[:m] (convex, ccw, or a segment/point) clipped by the ccw convex
     polygon clip[:c], poly's depth (column 2) interpolated; result in poly (out is scratch);
-    returns its size."""
+    returns its size.
+
+    An edge whose inner side holds poly's box, by more than the rounding of the side tests,
+    keeps every point and is passed over: an edge of a phone's face lying on the face of another
+    has most of that face's 24 edges far from it."""
+    xlo, xhi, ylo, yhi = _box(poly, m)
     for e in range(c):
         ex0, ey0 = clip[e, 0], clip[e, 1]
         ex1, ey1 = clip[(e + 1) % c, 0], clip[(e + 1) % c, 1]
+        # The least of the side tests below over poly's box: they are linear in (px, py).
+        dx, dy = ex1 - ex0, ey1 - ey0
+        least = dx * ((ylo if dx >= 0.0 else yhi) - ey0) - dy * ((xhi if dy >= 0.0 else xlo) - ex0)
+        scale = abs(ex0) + abs(ey0) + max(abs(xlo), abs(xhi)) + max(abs(ylo), abs(yhi))
+        if least > 1e-12 * (abs(dx) + abs(dy)) * (1.0 + scale):
+            continue
         n = 0
         if m == 1:
             side = (ex1 - ex0) * (poly[0, 1] - ey0) - (ey1 - ey0) * (poly[0, 0] - ex0)
@@ -526,7 +537,19 @@ def _clip(poly, m, clip, c, out):
         m = n
         if m == 0:
             return 0
+        xlo, xhi, ylo, yhi = _box(poly, m)
     return m
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _box(pts, m):
+    """(x_min, x_max, y_min, y_max) of pts[:m]."""
+    xlo = xhi = pts[0, 0]
+    ylo = yhi = pts[0, 1]
+    for a in range(1, m):
+        xlo, xhi = min(xlo, pts[a, 0]), max(xhi, pts[a, 0])
+        ylo, yhi = min(ylo, pts[a, 1]), max(yhi, pts[a, 1])
+    return xlo, xhi, ylo, yhi
 
 
 @numba.njit(**STEP_FLAGS)
