@@ -417,12 +417,32 @@ def _world(verts, core, k):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _heights(verts, core, n, sign, out):
-    """Every vertex's height along sign*n into out[:, 2]."""
+def _heights(verts, core, n, sign, tol, out):
+    """Every vertex's height along sign*n into out[:, 2] where it can be within tol of the
+    highest, -inf where it cannot. Each is first taken in the body frame (n turned into it: three
+    products a vertex instead of the placed vertex's twelve), which differs from the placed
+    vertex's height only by rounding, far below ``margin``: a vertex lower than the highest by more
+    than tol and the rounding of both needs no more (two thirds of a phone's 48 vertices)."""
+    start, count, rot, p = core
+    r0, r1, r2 = rot
     nx, ny, nz = n
-    for k in range(core.count):
-        x, y, z = _world(verts, core, k)
-        out[k, 2] = sign * (x * nx + y * ny + z * nz)
+    bx = sign * (r0[0] * nx + r1[0] * ny + r2[0] * nz)
+    by = sign * (r0[1] * nx + r1[1] * ny + r2[1] * nz)
+    bz = sign * (r0[2] * nx + r1[2] * ny + r2[2] * nz)
+    top = -np.inf
+    reach = 0.0
+    for v in range(start, start + count):
+        top = max(top, verts[v, 0] * bx + verts[v, 1] * by + verts[v, 2] * bz)
+        reach = max(reach, abs(verts[v, 0]) + abs(verts[v, 1]) + abs(verts[v, 2]))
+    margin = 1e-12 * (1.0 + abs(p[0]) + abs(p[1]) + abs(p[2]) + reach)
+    floor = top - tol - 3.0 * margin
+    for k in range(count):
+        v = start + k
+        if verts[v, 0] * bx + verts[v, 1] * by + verts[v, 2] * bz >= floor:
+            x, y, z = _world(verts, core, k)
+            out[k, 2] = sign * (x * nx + y * ny + z * nz)
+        else:
+            out[k, 2] = -np.inf
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -645,11 +665,11 @@ def feature_hulls(va, a, vb, b, d, n, tol, work):
     within tol of their supporting planes across the unit normal n (3-tuple, B to A) of cores a
     distance d apart, in ``plane_basis(n)``, column 2 ``tol - height``: A's in work[0], B's in
     work[1]; returns their sizes and the length under which points merge. Every vertex's
-    height stays in work[4] and work[5] for ``patch_moments``."""
+    height that can be within tol stays in work[4] and work[5] for ``patch_moments``."""
     ux, uy, uz, wx, wy, wz = plane_basis(n[0], n[1], n[2])
     u, w = (ux, uy, uz), (wx, wy, wz)
-    _heights(va, a, n, -1.0, work[4])
-    _heights(vb, b, n, 1.0, work[5])
+    _heights(va, a, n, -1.0, tol, work[4])
+    _heights(vb, b, n, 1.0, tol, work[5])
     na = _feature(va, a, u, w, work[4], tol, work[0])
     nb = _feature(vb, b, u, w, work[5], tol, work[1])
     return _hulls(na, nb, d, tol, work)
@@ -725,10 +745,11 @@ def _overlap_row(ha, hb, work):
 
 
 @numba.njit(**STEP_FLAGS)
-def patch_moments(va, a, vb, b, p_a, p_b, tol, work):
+def patch_moments(va, a, vb, b, p_a, p_b, tol, hull_tol, work):
     """``contact_patch``'s second moments ``(s_uu, s_uw, s_ww)`` for cores ``a`` and ``b`` whose
     closest points p_a, p_b were those of the last ``feature_hulls`` in work (as
-    ``dem.crown.crowned_contact``'s), from the heights it left: no second pass over the cores. Where
+    ``dem.crown.crowned_contact``'s, for ``hull_tol``), from the heights it left: no second pass
+    over the cores unless tol exceeds hull_tol (a deep impact). Where
     one core has a single vertex within tol, the patch is that point or nothing, with no moments
     either way, so the other's hull and the clipping are skipped (a corner on a face of 24
     outline vertices: about a third of a resting pile's contacts)."""
@@ -738,6 +759,9 @@ def patch_moments(va, a, vb, b, p_a, p_b, tol, work):
         return 0.0, 0.0, 0.0
     nx, ny, nz = nx / d, ny / d, nz / d
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
+    if tol > hull_tol:
+        _heights(va, a, (nx, ny, nz), -1.0, tol, work[4])
+        _heights(vb, b, (nx, ny, nz), 1.0, tol, work[5])
     na = _feature(va, a, (ux, uy, uz), (wx, wy, wz), work[4], tol, work[0])
     nb = _feature(vb, b, (ux, uy, uz), (wx, wy, wz), work[5], tol, work[1])
     if na == 1 or nb == 1:

@@ -257,7 +257,7 @@ def _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work):
     delta = ra - crowned
     if delta <= 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
-    s_uu, s_uw, s_ww = patch_moments(va, a, big, b, p_a, p_b, delta, work)
+    s_uu, s_uw, s_ww = patch_moments(va, a, big, b, p_a, p_b, delta, tol, work)
     cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww, True
 
@@ -305,7 +305,7 @@ def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, w
     delta = reach - crowned
     if delta <= 0.0:
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    s_uu, s_uw, s_ww = patch_moments(va, a, vb, b, p_a, p_b, delta, work)
+    s_uu, s_uw, s_ww = patch_moments(va, a, vb, b, p_a, p_b, delta, tol, work)
     cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww
 
