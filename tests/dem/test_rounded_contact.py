@@ -255,3 +255,123 @@ def test_a_pieces_box_holds_its_core_along_every_direction():
             low, high = box_extent(rows.x, rows.half, rot[None], k, 0, *n)
 
             assert low <= heights.min() + 1e-15 and high >= heights.max() - 1e-15
+
+
+def _smartphone():
+    from dem.scenarios.feeder import make_items
+    from dem.scenarios.feeder_config import load_feeder_config
+
+    config = load_feeder_config("examples/feeder.toml")
+    items = config.items.model_copy(update={"representation": "polyhedron", "counts": {"smartphone": 1}})
+    return make_items(items, np.random.default_rng(0))[0].shape
+
+
+def test_a_touching_pairs_patch_moments_are_those_of_its_patch_taken_afresh():
+    """The kernels take the patch's second moments (``patch_moments``) from the crowned contact's
+    projections, and skip the hulls where a side has one vertex within the overlap: on phones
+    resting face on face, tilted, edge or corner on face and pressed deeper than the crown's
+    tolerance, they
+    must be those of ``contact_patch`` taken from scratch, to the bit."""
+    from dem.bodies import Spheres
+    from dem.convex import contact_patch, patch_moments
+    from dem.crown import crowned_contact
+    from dem.quaternion import matrices
+
+    phone = _smartphone()
+    spheres = Spheres()
+    spheres.append(0, phone, EYE, np.zeros(3))
+    rows = spheres.arrays()
+    va, start, count = rows.core, int(rows.core_start[0]), int(rows.core_count[0])
+    r, crown = float(rows.rounding[0]), tuple(float(c) for c in rows.crown[0])
+    tol = 8.0 * crown[2]
+    b = place(start, count, EYE, np.zeros(3))
+    rng = np.random.default_rng(11)
+    kinds = {"single": 0, "polygon": 0, "deep": 0}
+    for trial in range(450):
+        tilt = rng.choice([0.0, 1e-5, 1e-3, 0.05]) * rng.normal(size=3)
+        if trial % 3 == 0:  # on its long edge
+            tilt += np.array([0.5 * math.pi, 0.0, 0.0])
+        tilt[2] += rng.uniform(0.0, 2.0 * math.pi)
+        angle = np.linalg.norm(tilt)
+        quat = np.array([math.cos(angle / 2), *(math.sin(angle / 2) * tilt / angle)])
+        if trial % 3 == 1:  # any way up: mostly on a corner
+            quat = rng.normal(size=4)
+        rot = matrices((quat / np.linalg.norm(quat))[None, :])[0]
+        pos = np.array([*rng.uniform(-0.06, 0.06, size=2), 0.2])
+        d = gjk_distance(va, place(start, count, rot, pos), va, b)[0]
+        delta = 10.0 ** rng.uniform(-4.0 if trial % 3 == 1 else -7.0, math.log10(3.0 * r))
+        pos[2] -= d - (2.0 * r - delta)  # pressed down to an overlap of about delta
+        a = place(start, count, rot, pos)
+        d, ax, ay, az, bx, by, bz = gjk_distance(va, a, va, b)
+        if not 0.0 < d < 2.0 * r:
+            continue
+        work = scratch()
+        crowned = crowned_contact(va, a, crown, va, b, crown, (ax, ay, az), (bx, by, bz), tol, work)[0]
+        delta = 2.0 * r - crowned
+        if delta <= 0.0:
+            continue
+        heights_a = (pos + phone.piece(0) @ rot.T)[:, 2]
+        single = np.sum(heights_a <= heights_a.min() + delta) == 1
+        kinds["single" if single else "polygon"] += 1
+        kinds["deep"] += delta > tol
+
+        moments = patch_moments(va, a, va, b, (ax, ay, az), (bx, by, bz), delta, tol, work)
+
+        afresh = contact_patch(va, a, va, b, (ax, ay, az), (bx, by, bz), delta, scratch())[5:]
+        assert moments == afresh
+    assert min(kinds.values()) >= 10, kinds
+
+
+def _clipped(poly, clip):
+    """Sutherland-Hodgman as ``dem.convex._clip`` writes it, with every edge taken."""
+    poly = [tuple(p) for p in poly]
+    for e in range(len(clip)):
+        (ex0, ey0), (ex1, ey1) = clip[e][:2], clip[(e + 1) % len(clip)][:2]
+        out = []
+        m = len(poly)
+        for a in range(m if m > 2 else 1):
+            (px, py, pd), (qx, qy, qd) = poly[a], poly[(a + 1) % m]
+            sp = (ex1 - ex0) * (py - ey0) - (ey1 - ey0) * (px - ex0)
+            sq = (ex1 - ex0) * (qy - ey0) - (ey1 - ey0) * (qx - ex0)
+            if sp >= 0.0:
+                out.append(poly[a])
+            if m > 1 and (sp >= 0.0) != (sq >= 0.0):
+                t = sp / (sp - sq)
+                out.append((px + t * (qx - px), py + t * (qy - py), pd + t * (qd - pd)))
+            if m == 2 and sq >= 0.0:
+                out.append(poly[1])
+        poly = out
+        if not poly:
+            return []
+    return poly
+
+
+def test_clipping_passes_over_only_edges_that_keep_every_point():
+    """``_clip`` passes over a clip edge whose inner side holds the polygon's box: the result must
+    be that of taking every edge, to the bit, also for polygons that touch or cross the edges
+    (points near a large offset, as world coordinates are)."""
+    from scipy.spatial import ConvexHull
+
+    from dem.convex import _clip
+
+    rng = np.random.default_rng(5)
+    passed_over = 0
+    for _ in range(400):
+        centre = rng.uniform(-0.5, 0.5, size=2)
+        clip_pts = centre + rng.uniform(-0.05, 0.05, size=(12, 2))
+        clip = clip_pts[ConvexHull(clip_pts).vertices]  # counter-clockwise
+        size = rng.choice([0.002, 0.02, 0.08])
+        pts = centre + rng.uniform(-0.05, 0.05, size=2) + rng.uniform(-size, size, size=(6, 2))
+        corners = pts[ConvexHull(pts).vertices]
+        poly = np.column_stack([corners, rng.uniform(0.0, 1e-4, size=len(corners))])  # depths ride along
+        m = len(poly)
+        work = np.zeros((3, 64, 3))
+        work[0, :m] = poly
+        work[1, : len(clip), :2] = clip
+        expected = _clipped(poly, clip)
+
+        n = _clip(work[0], m, work[1], len(clip), work[2])
+
+        assert [tuple(row) for row in work[0, :n]] == expected
+        passed_over += n == m and expected == [tuple(p) for p in poly]
+    assert passed_over >= 20
