@@ -32,13 +32,15 @@ JIT_FLAGS = dict(cache=True, fastmath=False, error_model="numpy", boundscheck=Fa
 if _RUNTIME_OPTION:
     JIT_FLAGS["_nrt"] = True
 
-# The step loop (``dem.loop._steps``), ``compute_forces`` and ``evaluate_into`` are compiled
+# The step loop (``dem.loop._steps``), ``compute_forces``, ``evaluate_into`` and the contact
+# geometry kernels that allocate nothing (``dem/convex.py``, ``dem/crown.py``,
+# ``dem/rounded_contact.py``; not GJK nor ``facet_geometry``, which allocate) are compiled
 # without numba's runtime (``_nrt=False``): no atomic reference count up and down for each array
 # they bind (their container arguments, every ``bodies.pos`` read, every view), which numba's
 # pruning left at about 150 pairs a step, 97 % of a one-sphere step (``benchmarks/README.md``,
-# engine speed session 9). Safe because they only borrow: they allocate nothing (numba refuses to
-# compile an allocation without the runtime) and return no array, and each compiled function they
-# call balances its own counts (which is why ``JIT_FLAGS`` sets ``_nrt=True`` explicitly: a callee
-# compiled for a caller inherits the caller's setting unless it sets its own). The results are
-# the same to the bit.
+# engine speed session 9), and about 40 a touching piece pair (polyhedra session 12). Safe
+# because they only borrow: they allocate nothing (numba refuses to compile an allocation without
+# the runtime) and return no array, and each compiled function they call balances its own counts
+# (which is why ``JIT_FLAGS`` sets ``_nrt=True`` explicitly: a callee compiled for a caller
+# inherits the caller's setting unless it sets its own). The results are the same to the bit.
 STEP_FLAGS = dict(JIT_FLAGS, _nrt=False) if _RUNTIME_OPTION else dict(JIT_FLAGS)
