@@ -130,21 +130,9 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
 
     while True:
         status = _steps(
-            n_steps,
-            dt,
-            resume,
-            force_rebuild,
-            live,
-            live_spheres,
-            rotors,
-            lb,
-            run,
-            settings,
-            bodies,
-            spheres,
-            walls,
-            lists,
-        )
+            n_steps, dt, resume, force_rebuild, live, live_spheres, rotors, lb,
+            run, settings, bodies, spheres, walls, lists,
+        )  # fmt: skip
         if status != _BODIES_LEFT:
             break
         live, live_spheres, rotors = live_rows(bodies.active, spheres.body, bodies.inertia)
@@ -157,21 +145,9 @@ def run_steps(n_steps, dt, need_forces, resume, run, settings, bodies, spheres, 
 
 @numba.njit(**STEP_FLAGS)
 def _steps(
-    n_steps,
-    dt,
-    resume,
-    force_rebuild,
-    live,
-    live_spheres,
-    rotors,
-    lb,
-    run,
-    settings,
-    bodies,
-    spheres,
-    walls,
-    lists,
-):
+    n_steps, dt, resume, force_rebuild, live, live_spheres, rotors, lb,
+    run, settings, bodies, spheres, walls, lists,
+):  # fmt: skip
     """The steps of ``run_steps`` from step ``counters[C_STEPS]`` until ``n_steps`` (``STATUS_OK``),
     an unstable state or a full list (their status), or a step after which bodies left the domain
     (``_BODIES_LEFT``: the caller lists the live rows again, which allocates). Compiled without
