@@ -23,6 +23,7 @@ on it; the second says where the search is.
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import statistics
 import time
@@ -46,26 +47,27 @@ def genes_of(params) -> np.ndarray:
     )
 
 
-def draw(genes: np.ndarray, rng: np.random.Generator, size=None):
-    """N_t of the synthetic feeder: 0 (emptied) or a clog that keeps 1 + Poisson(lam) items."""
+def draw(genes: np.ndarray, rng: np.random.Generator, size=None, jam: float = 0.0):
+    """N_t of the synthetic feeder: 0 (emptied) or a clog that keeps 1 + Poisson(lam + jam) items
+    (``jam = 6`` makes jams keep 7-27 items, as the full feeder's do)."""
     p_clog = 1.0 / (
         1.0 + np.exp(-(9.0 * (genes[3] - 0.55) - 5.0 * (genes[2] - 0.4) + 1.5 * (genes[0] - 0.5)))
     )
-    lam = 1.0 + 12.0 * genes[3] ** 2 * (1.2 - genes[2])
+    lam = 1.0 + 12.0 * genes[3] ** 2 * (1.2 - genes[2]) + jam
     clogged = rng.random(size) < p_clog
     return np.where(clogged, np.minimum(1 + rng.poisson(lam, size), N_ITEMS), 0)
 
 
-def true_median(genes: np.ndarray) -> float:
-    return float(np.median(draw(genes, np.random.default_rng(12345), 4001)))
+def true_median(genes: np.ndarray, jam: float = 0.0) -> float:
+    return float(np.median(draw(genes, np.random.default_rng(12345), 4001, jam)))
 
 
-def respond(spec) -> SimulationResult:
+def respond(spec, jam: float = 0.0) -> SimulationResult:
     genes = genes_of(spec.params)
     steps = int(1000 * math.sqrt(spec.params["E"] / 1e5))
     if genes[0] < 0.2:
         return SimulationResult(status=SimulationStatus.UNSTABLE, message="overlap", n_items=N_ITEMS)
-    n_t = int(draw(genes, np.random.default_rng(spec.seed)))
+    n_t = int(draw(genes, np.random.default_rng(spec.seed), jam=jam))
     return SimulationResult(
         status=SimulationStatus.OK,
         n_items=N_ITEMS,
@@ -93,6 +95,7 @@ def searched(
                 "population": args.population,
                 "offspring": args.offspring,
                 "generations": generations,
+                "match_estimate": args.estimate,
             },
             **({"validation": validation} if validation is not None else {}),
         }
@@ -100,7 +103,8 @@ def searched(
     store = MemoryStore()
     study_id = store.create_study(definition.model_dump(mode="json"), None)
     started = time.process_time()
-    Driver(store, SyntheticExecutor(respond)).run_to_completion(study_id, poll_timeout=0)
+    executor = SyntheticExecutor(functools.partial(respond, jam=args.jam))
+    Driver(store, executor).run_to_completion(study_id, poll_timeout=0)
     return definition, store, study_id, time.process_time() - started
 
 
@@ -112,7 +116,7 @@ def fig5(algorithm: str, seed: int, args) -> list[tuple[float, float]]:
     for record in store.trials(study_id):
         result = record.result
         if result is not None and result.ok and record.spec.generation <= definition.ga.generations:
-            truth = true_median(space.genes(record.spec.params))
+            truth = true_median(space.genes(record.spec.params), args.jam)
             rows.setdefault(record.spec.generation, []).append((result.n_remaining, truth))
     out = []
     for generation in sorted(rows):
@@ -130,7 +134,7 @@ def run(algorithm: str, seed: int, args) -> dict:
     for ev in evaluations:
         if ev.matches(tolerance):
             first = first or ev.individual + 1
-            if abs(true_median(space.genes(ev.params)) - target) <= tolerance:
+            if abs(true_median(space.genes(ev.params), args.jam) - target) <= tolerance:
                 validated = ev.individual + 1
                 break
     failed = sum(not ev.ok for ev in evaluations)
@@ -145,6 +149,8 @@ def main() -> None:
     parser.add_argument("--offspring", type=int, default=5)
     parser.add_argument("--algorithms", default="surrogate,nsga2,random")
     parser.add_argument("--fig5", action="store_true", help="Median N_t per generation, observed and true.")
+    parser.add_argument("--jam", type=float, default=0.0, help="Added to a jam's mean (6: 7-27 items).")
+    parser.add_argument("--estimate", choices=("own", "neighbours"), default="own", help="ga.match_estimate")
     args = parser.parse_args()
     if args.fig5:
         for algorithm in args.algorithms.split(","):
@@ -159,7 +165,7 @@ def main() -> None:
             )
         return
     box = np.random.default_rng(0).random((20000, 4))
-    share = np.mean([abs(true_median(g) - 4) <= 0.5 for g in box[:2000]])
+    share = np.mean([abs(true_median(g, args.jam) - 4) <= 0.5 for g in box[:2000]])
     print(f"share of the box whose true median N_t is 4: {share:.3f} (2000 uniform points)")
     print("| method | validated found | sims to first validated match (median; each seed) | failed | CPU s |")
     print("| --- | --- | --- | --- | --- |")

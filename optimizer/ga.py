@@ -54,6 +54,7 @@ from pymoo.operators.crossover.pntx import SinglePointCrossover
 from pymoo.operators.mutation.pm import PM
 from pymoo.problems.static import StaticProblem
 
+from optimizer.neighbours import NeighbourEstimate
 from optimizer.study import GASettings
 from optimizer.surrogate import MatchRule, SurrogateSearch
 
@@ -119,7 +120,10 @@ class EvaluatedDuplicateElimination(DefaultDuplicateElimination):
 class PymooSearch:
     """A pymoo algorithm behind the same two calls."""
 
-    def __init__(self, settings: GASettings, n_genes: int, seed: int):
+    def __init__(
+        self, settings: GASettings, n_genes: int, seed: int, estimate: NeighbourEstimate | None = None
+    ):
+        self.estimate = estimate  # None: each set is ranked on its own runs
         operators = dict(
             pop_size=settings.population,
             n_offsprings=settings.offspring,
@@ -152,25 +156,50 @@ class PymooSearch:
         objectives = np.asarray(objectives, dtype=float)
         if constraints is None:  # no constraint known: every set counts as feasible
             constraints = np.zeros((len(objectives), N_CONSTRAINTS))
-        values = dict(F=objectives, G=np.asarray(constraints, dtype=float))
+        constraints = np.asarray(constraints, dtype=float)
+        estimate = getattr(self, "estimate", None)  # searches saved before it have none
+        if estimate is not None and observations is not None:
+            estimate.remember(genes, observations)
+            objectives, constraints = estimate.pooled(genes, objectives, constraints)
+            self._re_estimate_survivors()
+        values = dict(F=objectives, G=constraints)
         Evaluator().eval(StaticProblem(self.algorithm.problem, **values), population)
         self.algorithm.tell(infills=population)
+
+    def _re_estimate_survivors(self) -> None:
+        """The new runs sharpen the pooled f1 of the living population: update it before survival."""
+        population = self.algorithm.pop
+        if population is None or len(population) == 0:
+            return
+        objectives, constraints = self.estimate.pooled(
+            population.get("X"), population.get("F"), population.get("G")
+        )
+        for individual, f, g in zip(population, objectives, constraints, strict=True):
+            _set_objectives(individual, f, g)
 
     def revise(
         self, genes: np.ndarray, objectives: np.ndarray, constraints: np.ndarray, observations=None
     ) -> None:
         """Earlier individuals were re-measured (extra replicates): survivors with these genes take
         the new F and G, so an elite that stopped matching loses its place at the next survival."""
+        estimate = getattr(self, "estimate", None)
+        if estimate is not None and observations is not None:
+            estimate.remember(genes, observations)
+            self._re_estimate_survivors()
+            return  # survivors' own F and G enter only through the pooled estimate
         population = self.algorithm.pop
         if population is None or len(population) == 0:
             return
         kept = population.get("X")
         for row, gene in enumerate(np.asarray(genes, dtype=float)):
             for index in np.flatnonzero(np.all(np.isclose(kept, gene, rtol=0, atol=1e-12), axis=1)):
-                individual = population[index]
-                individual.F = np.asarray(objectives[row], dtype=float)
-                individual.G = np.asarray(constraints[row], dtype=float)
-                individual.CV = None  # recomputed from G on the next read
+                _set_objectives(population[index], objectives[row], constraints[row])
+
+
+def _set_objectives(individual, objectives, constraints) -> None:
+    individual.F = np.asarray(objectives, dtype=float)
+    individual.G = np.asarray(constraints, dtype=float)
+    individual.CV = None  # recomputed from G on the next read
 
 
 Search = RandomSearch | PymooSearch | SurrogateSearch
@@ -180,14 +209,19 @@ def create_search(
     settings: GASettings, n_genes: int, seed: int, rule: MatchRule | tuple[MatchRule, ...] | None = None
 ) -> Search:
     """The study's search; ``rule`` (how f1 is formed, one per experiment) is needed by the
-    surrogate only."""
+    surrogate and by the GA's neighbours' estimate (``optimizer/neighbours.py``)."""
     if settings.algorithm == "random":
         return RandomSearch(n_genes, settings.population, settings.offspring, seed)
     if settings.algorithm == "surrogate":
         if rule is None:
             raise ValueError("the surrogate search needs the study's match rule")
         return SurrogateSearch(n_genes, settings.population, settings.offspring, seed, rule)
-    return PymooSearch(settings, n_genes, seed)
+    estimate = None
+    if settings.match_estimate == "neighbours":
+        if rule is None:
+            raise ValueError("the neighbours' estimate needs the study's match rule")
+        estimate = NeighbourEstimate(rule if isinstance(rule, tuple) else (rule,))
+    return PymooSearch(settings, n_genes, seed, estimate)
 
 
 def to_bytes(search: Search) -> bytes:

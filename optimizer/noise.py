@@ -32,6 +32,15 @@ def wasserstein_many(samples: np.ndarray, reference: Sequence[float]) -> np.ndar
     return np.abs(cdf_samples - cdf_reference[None, :]) @ widths
 
 
+def wasserstein_floor(measured: Sequence[float], replicates: int, quantile: float) -> float:
+    """The W1 a perfect model would show with ``replicates`` runs: the ``quantile`` of the W1
+    between that many values drawn from the measured ones and the measured ones (a deterministic
+    bootstrap of 4000 draws)."""
+    rng = np.random.default_rng(0)
+    draws = rng.choice(np.asarray(measured, dtype=float), size=(4000, replicates))
+    return float(np.quantile(wasserstein_many(draws, measured), quantile))
+
+
 def wasserstein_pairs(first: np.ndarray, second: np.ndarray) -> np.ndarray:
     """W1 between row i of ``first`` (r x n) and row i of ``second`` (r x m), as a length-r array."""
     first, second = np.atleast_2d(first).astype(float), np.atleast_2d(second).astype(float)

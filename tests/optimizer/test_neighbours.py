@@ -1,0 +1,116 @@
+"""The GA's pooled estimate of a set's match (``ga.match_estimate = "neighbours"``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+from scipy.stats import wasserstein_distance
+
+from optimizer.ga import create_search
+from optimizer.neighbours import NeighbourEstimate
+from optimizer.noise import wasserstein_floor
+from optimizer.study import NOISE_FLOOR_QUANTILE, Experiment, GASettings
+from optimizer.surrogate import MatchRule, Observation
+
+MEASURED = (0, 0, 1, 2, 3, 4, 4, 12, 15, 16)
+RULE = MatchRule(measured=MEASURED, target=4, tolerance=0.5)
+
+
+def ok(*values):
+    return Observation(tuple(values), 1.0, True)
+
+
+FAILED = Observation((), 1.0, False)
+
+
+def test_a_set_far_from_all_others_is_judged_on_its_own_runs():
+    estimate = NeighbourEstimate((RULE,))
+    estimate.remember(np.array([[0.1, 0.1], [0.9, 0.9]]), [ok(0, 2, 13), ok(30)])
+    f1, violation = estimate.distances(np.array([[0.1, 0.1]]))
+    own = wasserstein_distance([0, 2, 13], MEASURED)
+    assert f1[0] == pytest.approx(own, rel=1e-6)  # the far set weighs exp(-0.8^2 2 / 0.08) ~ 1e-7
+    assert violation[0] == pytest.approx(own - wasserstein_floor(MEASURED, 3, NOISE_FLOOR_QUANTILE), rel=1e-5)
+
+
+def test_the_pooled_distance_falls_as_the_share_of_jams_nears_the_experiments():
+    """From the emptying side the median reads |0 - 4| whatever the share of jams; the pooled W1
+    must fall as that share rises towards the experiment's three in ten."""
+    genes = np.array([[0.5, 0.5 + 0.01 * k] for k in range(10)])
+    readings = []
+    for jams in (0, 1, 2, 3):
+        estimate = NeighbourEstimate((RULE,))
+        estimate.remember(genes, [ok(14) if k < jams else ok(0) for k in range(10)])
+        readings.append(estimate.distances(genes[:1])[0][0])
+    assert readings[0] > readings[1] > readings[2] > readings[3]
+
+
+def test_a_set_among_runs_like_the_experiment_is_feasible_and_one_among_empty_trays_is_not():
+    cluster = np.array([[0.5 + 0.01 * k, 0.5] for k in range(10)])
+    empty = np.array([[0.1 + 0.01 * k, 0.1] for k in range(10)])
+    estimate = NeighbourEstimate((RULE,))
+    estimate.remember(cluster, [ok(v) for v in MEASURED])
+    estimate.remember(empty, [ok(0) for _ in range(10)])
+    _, violation = estimate.distances(np.array([[0.52, 0.5], [0.12, 0.1]]))
+    assert violation[0] <= 0 < violation[1]
+
+
+def test_failed_sets_keep_their_violation_and_are_pooled_by_no_one():
+    estimate = NeighbourEstimate((RULE,))
+    genes = np.array([[0.5, 0.5], [0.51, 0.5]])
+    estimate.remember(genes, [ok(4), FAILED])
+    assert list(estimate.history) == [(0.5, 0.5)]
+    objectives = np.array([[0.0, 1.0], [30.0, 2.0]])
+    constraints = np.array([[-0.5, 0.0], [29.5, 1.0]])
+    f, g = estimate.pooled(genes, objectives, constraints)
+    assert f[1].tolist() == [30.0, 2.0] and g[1].tolist() == [29.5, 1.0]
+    assert f[0, 0] == pytest.approx(wasserstein_distance([4], MEASURED)) and f[0, 1] == 1.0
+
+
+def test_a_re_measured_set_replaces_its_runs():
+    estimate = NeighbourEstimate((RULE,))
+    estimate.remember(np.array([[0.5, 0.5]]), [ok(0)])
+    estimate.remember(np.array([[0.5, 0.5]]), [ok(0, 4, 12)])
+    assert estimate.history[(0.5, 0.5)] == {"n_remaining": (0, 4, 12)}
+
+
+def test_the_ga_re_estimates_its_survivors_when_new_runs_arrive():
+    rule = MatchRule(measured=MEASURED, target=4, tolerance=0.5)
+    search = create_search(GASettings(population=8, offspring=4, match_estimate="neighbours"), 2, 0, rule)
+    genes = search.ask()
+    empty = [ok(0) for _ in genes]
+    search.tell(genes, np.column_stack([np.full(len(genes), 4.0), genes[:, 1]]), np.zeros((8, 2)), empty)
+    first = search.algorithm.pop
+    before = {tuple(x): f[0] for x, f in zip(first.get("X"), first.get("F"), strict=True)}
+    offspring = search.ask()
+    jams = [ok(14) for _ in offspring]
+    search.tell(offspring, np.column_stack([np.full(4, 10.0), offspring[:, 1]]), np.zeros((4, 2)), jams)
+    now = search.algorithm.pop
+    kept = [(tuple(x), f[0]) for x, f in zip(now.get("X"), now.get("F"), strict=True) if tuple(x) in before]
+    changed = [f1 != before[x] for x, f1 in kept]
+    assert changed and any(changed)  # the jams nearby moved the old survivors' pooled W1
+
+
+def test_the_neighbours_estimate_is_deterministic_for_a_study_seed():
+    rule = MatchRule(measured=MEASURED, target=4, tolerance=0.5)
+    batches = []
+    for _ in range(2):
+        search = create_search(GASettings(population=8, offspring=4, match_estimate="neighbours"), 2, 7, rule)
+        asked = []
+        for _ in range(3):
+            genes = search.ask()
+            asked.append(genes)
+            runs = [ok(int(14 * (g[0] > 0.6))) for g in genes]
+            search.tell(genes, np.column_stack([genes[:, 0], genes[:, 1]]), np.zeros((len(genes), 2)), runs)
+        batches.append(np.vstack(asked))
+    assert np.array_equal(batches[0], batches[1])
+
+
+def test_an_unknown_match_estimate_is_refused_with_the_choices():
+    with pytest.raises(ValidationError, match="'own' or 'neighbours'"):
+        GASettings(match_estimate="pooled")
+
+
+def test_the_noise_floor_is_the_shared_bootstrap_rounded():
+    experiment = Experiment(measured=list(MEASURED))
+    assert experiment.noise_floor(3) == round(wasserstein_floor(MEASURED, 3, NOISE_FLOOR_QUANTILE), 2) == 5.03
