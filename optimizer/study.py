@@ -267,6 +267,16 @@ class GASettings(_Strict):
         "a noise-aware estimate at no extra simulation, optimizer/neighbours.py).",
     )
 
+    @model_validator(mode="after")
+    def _estimate_for_a_ga(self) -> GASettings:
+        if self.match_estimate == "neighbours" and self.algorithm not in ("nsga2", "spea2"):
+            raise ValueError(
+                f"ga.match_estimate = 'neighbours' applies to 'nsga2' and 'spea2', not to "
+                f"'{self.algorithm}' (the surrogate models the response itself; random search ranks "
+                "nothing): remove it or choose a GA"
+            )
+        return self
+
     def individuals(self) -> int:
         return self.population + self.offspring * self.generations
 

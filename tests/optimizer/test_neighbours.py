@@ -114,3 +114,9 @@ def test_an_unknown_match_estimate_is_refused_with_the_choices():
 def test_the_noise_floor_is_the_shared_bootstrap_rounded():
     experiment = Experiment(measured=list(MEASURED))
     assert experiment.noise_floor(3) == round(wasserstein_floor(MEASURED, 3, NOISE_FLOOR_QUANTILE), 2) == 5.03
+
+
+@pytest.mark.parametrize("algorithm", ["surrogate", "random"])
+def test_the_neighbours_estimate_with_a_search_that_is_no_ga_is_refused(algorithm):
+    with pytest.raises(ValidationError, match="applies to 'nsga2' and 'spea2'"):
+        GASettings(algorithm=algorithm, match_estimate="neighbours")
