@@ -30,7 +30,16 @@ def test_a_set_far_from_all_others_is_judged_on_its_own_runs():
     f1, violation = estimate.distances(np.array([[0.1, 0.1]]))
     own = wasserstein_distance([0, 2, 13], MEASURED)
     assert f1[0] == pytest.approx(own, rel=1e-6)  # the far set weighs exp(-0.8^2 2 / 0.08) ~ 1e-7
-    assert violation[0] == pytest.approx(own - wasserstein_floor(MEASURED, 3, NOISE_FLOOR_QUANTILE), rel=1e-5)
+    # Three runs pooled: the floor is that of the experiment's own ten values, not of three.
+    floor = wasserstein_floor(MEASURED, 10, NOISE_FLOOR_QUANTILE)
+    assert violation[0] == pytest.approx(own - floor, rel=1e-5)
+
+
+def test_the_floor_tightens_with_the_pooled_runs_and_is_never_looser_than_the_experiments_own():
+    estimate = NeighbourEstimate((RULE,))
+    assert estimate.floor(0, 3) == estimate.floor(0, 10) == pytest.approx(3.1, abs=0.01)
+    assert estimate.floor(0, 40) == pytest.approx(1.53, abs=0.01)
+    assert estimate.floor(0, 40) < estimate.floor(0, 20) < estimate.floor(0, 10)
 
 
 def test_the_pooled_distance_falls_as_the_share_of_jams_nears_the_experiments():
