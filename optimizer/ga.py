@@ -120,10 +120,13 @@ class EvaluatedDuplicateElimination(DefaultDuplicateElimination):
 class PymooSearch:
     """A pymoo algorithm behind the same two calls."""
 
+    estimate: NeighbourEstimate | None = None  # None: each set is ranked on its own runs (and in
+    # searches pickled before the neighbours' estimate existed)
+
     def __init__(
         self, settings: GASettings, n_genes: int, seed: int, estimate: NeighbourEstimate | None = None
     ):
-        self.estimate = estimate  # None: each set is ranked on its own runs
+        self.estimate = estimate
         operators = dict(
             pop_size=settings.population,
             n_offsprings=settings.offspring,
@@ -157,10 +160,9 @@ class PymooSearch:
         if constraints is None:  # no constraint known: every set counts as feasible
             constraints = np.zeros((len(objectives), N_CONSTRAINTS))
         constraints = np.asarray(constraints, dtype=float)
-        estimate = getattr(self, "estimate", None)  # searches saved before it have none
-        if estimate is not None and observations is not None:
-            estimate.remember(genes, observations)
-            objectives, constraints = estimate.pooled(genes, objectives, constraints)
+        if self.estimate is not None and observations is not None:
+            self.estimate.remember(genes, observations)
+            objectives, constraints = self.estimate.pooled(genes, objectives, constraints)
             self._re_estimate_survivors()
         values = dict(F=objectives, G=constraints)
         Evaluator().eval(StaticProblem(self.algorithm.problem, **values), population)
@@ -181,12 +183,9 @@ class PymooSearch:
         self, genes: np.ndarray, objectives: np.ndarray, constraints: np.ndarray, observations=None
     ) -> None:
         """Earlier individuals were re-measured (extra replicates): survivors with these genes take
-        the new F and G, so an elite that stopped matching loses its place at the next survival."""
-        estimate = getattr(self, "estimate", None)
-        if estimate is not None and observations is not None:
-            estimate.remember(genes, observations)
-            self._re_estimate_survivors()
-            return  # survivors' own F and G enter only through the pooled estimate
+        the new F and G, so an elite that stopped matching loses its place at the next survival.
+        With the neighbours' estimate the new runs then re-pool every survivor; a set whose new
+        replicate failed keeps its own violation."""
         population = self.algorithm.pop
         if population is None or len(population) == 0:
             return
@@ -194,6 +193,9 @@ class PymooSearch:
         for row, gene in enumerate(np.asarray(genes, dtype=float)):
             for index in np.flatnonzero(np.all(np.isclose(kept, gene, rtol=0, atol=1e-12), axis=1)):
                 _set_objectives(population[index], objectives[row], constraints[row])
+        if self.estimate is not None and observations is not None:
+            self.estimate.remember(genes, observations)
+            self._re_estimate_survivors()
 
 
 def _set_objectives(individual, objectives, constraints) -> None:

@@ -129,3 +129,16 @@ def test_the_noise_floor_is_the_shared_bootstrap_rounded():
 def test_the_neighbours_estimate_with_a_search_that_is_no_ga_is_refused(algorithm):
     with pytest.raises(ValidationError, match="applies to 'nsga2' and 'spea2'"):
         GASettings(algorithm=algorithm, match_estimate="neighbours")
+
+
+def test_a_survivor_whose_extra_replicate_failed_keeps_its_own_violation():
+    search = create_search(GASettings(population=8, offspring=4, match_estimate="neighbours"), 2, 0, RULE)
+    genes = search.ask()
+    runs = [ok(4) for _ in genes]
+    search.tell(genes, np.column_stack([np.full(8, 4.0), genes[:, 1]]), np.zeros((8, 2)), runs)
+    survivor = search.algorithm.pop.get("X")[:1]
+    search.revise(survivor, np.array([[30.0, 1.0]]), np.array([[29.5, 1.0]]), [FAILED])
+    pop = search.algorithm.pop
+    row = np.flatnonzero(np.all(pop.get("X") == survivor[0], axis=1))[0]
+    assert pop.get("G")[row, 1] == 1.0 and pop.get("CV")[row, 0] > 0
+    assert tuple(survivor[0]) not in search.estimate.history
