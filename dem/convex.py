@@ -23,8 +23,8 @@ of their cores:
 A shape travels as its vertex array and a ``Core`` (which rows, and their placement as plain
 numbers: a tuple holding arrays costs numba reference counting on every call, which measured 20 %
 of a GJK query), points and directions as 3-tuples. Pure numba functions; the scratch array
-``work`` (7, MAX_FEATURE, 3) keeps them free of allocation (work[6] is a caller's: the plane's
-triangle of ``dem.rounded_contact``).
+``work`` (8, MAX_FEATURE, 3) keeps them free of allocation (work[6] is a caller's: the plane's
+triangle of ``dem.rounded_contact``; work[7] holds GJK's simplex, ``gjk_scratch``).
 """
 
 from __future__ import annotations
@@ -96,8 +96,16 @@ def at_point(row):
 
 
 def scratch() -> np.ndarray:
-    """The work array ``contact_patch`` needs."""
-    return np.zeros((7, MAX_FEATURE, 3))
+    """The work array ``contact_patch`` and ``gjk_query`` need."""
+    return np.zeros((8, MAX_FEATURE, 3))
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def gjk_scratch(work):
+    """GJK's simplex rows (10, ``_COLUMNS``) and weights (12,) as views of work[7] (a
+    ``scratch``), for ``gjk_query``: the two arrays ``gjk_distance`` allocates per query."""
+    flat = work[7].reshape(work.shape[1] * 3)
+    return flat[: 10 * _COLUMNS].reshape((10, _COLUMNS)), flat[10 * _COLUMNS : 10 * _COLUMNS + 12]
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -323,9 +331,18 @@ def gjk_distance(va, a, vb, b, simplex=None):
     change between steps, and one iteration confirms them instead of about eight); updated.
     Without it GJK starts from the support points along the line of the centres.
     """
-    pa, pb = a.pos, b.pos
     s = np.zeros((10, _COLUMNS))  # rows 0-3 the simplex, 4-9 scratch for the tetrahedron case
     lam = np.zeros(12)  # 0-3 the simplex's weights, 4-11 scratch for the tetrahedron case
+    return gjk_query(va, a, vb, b, simplex, s, lam)
+
+
+@numba.njit(**STEP_FLAGS)
+def gjk_query(va, a, vb, b, simplex, s, lam):
+    """``gjk_distance`` in the caller's scratch: s (10, ``_COLUMNS``) and lam (12,), as
+    ``gjk_scratch`` gives them (every row and weight it reads it writes first), so that the step
+    allocates nothing for a query."""
+    pa, pb = a.pos, b.pos
+    lam[:] = 0.0
     k = 0
     if simplex is not None:
         k = _warm_start(va, a, vb, b, simplex, s, lam)

@@ -45,7 +45,16 @@ import numba
 import numpy as np
 
 from dem.conf import JIT_FLAGS, STEP_FLAGS
-from dem.convex import Core, contact_patch, gjk_distance, patch_moments, placed, plane_basis, support
+from dem.convex import (
+    Core,
+    contact_patch,
+    gjk_query,
+    gjk_scratch,
+    patch_moments,
+    placed,
+    plane_basis,
+    support,
+)
 from dem.crown import crowned_contact
 from dem.facets import closest_point_on_triangle
 
@@ -291,7 +300,8 @@ def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, w
     end at that test, and each array passed to a compiled call costs an atomic reference count
     up and down."""
     reach = ra + rb
-    d, ax, ay, az, bx, by, bz = gjk_distance(va, a, vb, b, simplex)
+    s, lam = gjk_scratch(work)
+    d, ax, ay, az, bx, by, bz = gjk_query(va, a, vb, b, simplex, s, lam)
     if d > 0.0:
         axis[0], axis[1], axis[2] = (ax - bx) / d, (ay - by) / d, (az - bz) / d
     delta = reach - d
@@ -341,6 +351,7 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     core_reach = math.sqrt(core_reach2)
     px, py, pz = a.pos[0] - disp[0], a.pos[1] - disp[1], a.pos[2] - disp[2]
     gjk = np.empty((t_count, 7))
+    s, lam = gjk_scratch(work)
     best = np.inf
     bound = np.inf  # the least distance of a triangle passed over (a lower bound)
     ax = ay = az = bx = by = bz = 0.0
@@ -352,7 +363,7 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
             gjk[k, 0] = np.inf
             bound = min(bound, apart)
             continue
-        d, qx, qy, qz, wx, wy, wz = gjk_distance(va, a, tri, _triangle(facet, t))
+        d, qx, qy, qz, wx, wy, wz = gjk_query(va, a, tri, _triangle(facet, t), None, s, lam)
         gjk[k, 0], gjk[k, 1], gjk[k, 2], gjk[k, 3] = d, qx, qy, qz
         gjk[k, 4], gjk[k, 5], gjk[k, 6] = wx, wy, wz
         if d < best:
