@@ -439,7 +439,8 @@ def _heights(verts, core, n, sign, tol, out):
     highest, -inf where it cannot. Each is first taken in the body frame (n turned into it: three
     products a vertex instead of the placed vertex's twelve), which differs from the placed
     vertex's height only by rounding, far below ``margin``: a vertex lower than the highest by more
-    than tol and the rounding of both needs no more (two thirds of a phone's 48 vertices)."""
+    than tol and the rounding of both needs no more (two thirds of a phone's 48 vertices).
+    Returns the highest placed height (``_top``'s); the body-frame heights stay in out[:, 1]."""
     start, count, rot, p = core
     r0, r1, r2 = rot
     nx, ny, nz = n
@@ -448,31 +449,43 @@ def _heights(verts, core, n, sign, tol, out):
     bz = sign * (r0[2] * nx + r1[2] * ny + r2[2] * nz)
     top = -np.inf
     reach = 0.0
-    for v in range(start, start + count):
-        top = max(top, verts[v, 0] * bx + verts[v, 1] * by + verts[v, 2] * bz)
+    for k in range(count):
+        v = start + k
+        h = verts[v, 0] * bx + verts[v, 1] * by + verts[v, 2] * bz
+        out[k, 1] = h
+        top = max(top, h)
         reach = max(reach, abs(verts[v, 0]) + abs(verts[v, 1]) + abs(verts[v, 2]))
     margin = 1e-12 * (1.0 + abs(p[0]) + abs(p[1]) + abs(p[2]) + reach)
     floor = top - tol - 3.0 * margin
+    best = -np.inf
     for k in range(count):
-        v = start + k
-        if verts[v, 0] * bx + verts[v, 1] * by + verts[v, 2] * bz >= floor:
+        if out[k, 1] >= floor:
             x, y, z = _world(verts, core, k)
-            out[k, 2] = sign * (x * nx + y * ny + z * nz)
+            h = sign * (x * nx + y * ny + z * nz)
+            out[k, 2] = h
+            best = max(best, h)
         else:
             out[k, 2] = -np.inf
+    return best
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _feature(verts, core, u, w, heights, tol, out):
+def _top(heights, count):
+    """The highest of the heights[:count, 2] that ``_heights`` left."""
+    best = -np.inf
+    for k in range(count):
+        best = max(best, heights[k, 2])
+    return best
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _feature(verts, core, u, w, heights, best, tol, out):
     """The vertices within tol of their supporting plane (by their ``_heights``), projected on u
     and w, their column 2 ``tol - height above the plane``; returns how many (at most
     MAX_FEATURE). Only these are projected: about a third of a phone's vertices in a crowned
-    contact, a tenth in its patch."""
+    contact, a tenth in its patch. best: the highest of the heights (``_heights`` returns it)."""
     ux, uy, uz = u
     wx, wy, wz = w
-    best = -np.inf
-    for k in range(core.count):
-        best = max(best, heights[k, 2])
     m = 0
     for k in range(core.count):
         depth = tol - (best - heights[k, 2])
@@ -685,10 +698,10 @@ def feature_hulls(va, a, vb, b, d, n, tol, work):
     height that can be within tol stays in work[4] and work[5] for ``patch_moments``."""
     ux, uy, uz, wx, wy, wz = plane_basis(n[0], n[1], n[2])
     u, w = (ux, uy, uz), (wx, wy, wz)
-    _heights(va, a, n, -1.0, tol, work[4])
-    _heights(vb, b, n, 1.0, tol, work[5])
-    na = _feature(va, a, u, w, work[4], tol, work[0])
-    nb = _feature(vb, b, u, w, work[5], tol, work[1])
+    top_a = _heights(va, a, n, -1.0, tol, work[4])
+    top_b = _heights(vb, b, n, 1.0, tol, work[5])
+    na = _feature(va, a, u, w, work[4], top_a, tol, work[0])
+    nb = _feature(vb, b, u, w, work[5], top_b, tol, work[1])
     return _hulls(na, nb, d, tol, work)
 
 
@@ -777,10 +790,12 @@ def patch_moments(va, a, vb, b, p_a, p_b, tol, hull_tol, work):
     nx, ny, nz = nx / d, ny / d, nz / d
     ux, uy, uz, wx, wy, wz = plane_basis(nx, ny, nz)
     if tol > hull_tol:
-        _heights(va, a, (nx, ny, nz), -1.0, tol, work[4])
-        _heights(vb, b, (nx, ny, nz), 1.0, tol, work[5])
-    na = _feature(va, a, (ux, uy, uz), (wx, wy, wz), work[4], tol, work[0])
-    nb = _feature(vb, b, (ux, uy, uz), (wx, wy, wz), work[5], tol, work[1])
+        top_a = _heights(va, a, (nx, ny, nz), -1.0, tol, work[4])
+        top_b = _heights(vb, b, (nx, ny, nz), 1.0, tol, work[5])
+    else:
+        top_a, top_b = _top(work[4], a.count), _top(work[5], b.count)
+    na = _feature(va, a, (ux, uy, uz), (wx, wy, wz), work[4], top_a, tol, work[0])
+    nb = _feature(vb, b, (ux, uy, uz), (wx, wy, wz), work[5], top_b, tol, work[1])
     if na == 1 or nb == 1:
         return 0.0, 0.0, 0.0
     ha, hb, eps = _hulls(na, nb, d, tol, work)
