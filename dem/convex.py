@@ -440,7 +440,7 @@ def _heights(verts, core, n, sign, tol, out):
     products a vertex instead of the placed vertex's twelve), which differs from the placed
     vertex's height only by rounding, far below ``margin``: a vertex lower than the highest by more
     than tol and the rounding of both needs no more (two thirds of a phone's 48 vertices).
-    Returns the highest placed height (``_top``'s); the body-frame heights stay in out[:, 1]."""
+    Returns the highest placed height; the body-frame heights stay in out[:, 1]."""
     start, count, rot, p = core
     r0, r1, r2 = rot
     nx, ny, nz = n
@@ -470,20 +470,12 @@ def _heights(verts, core, n, sign, tol, out):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _top(heights, count):
-    """The highest of the heights[:count, 2] that ``_heights`` left."""
-    best = -np.inf
-    for k in range(count):
-        best = max(best, heights[k, 2])
-    return best
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
 def _feature(verts, core, u, w, heights, best, tol, out):
     """The vertices within tol of their supporting plane (by their ``_heights``), projected on u
     and w, their column 2 ``tol - height above the plane``; returns how many (at most
     MAX_FEATURE). Only these are projected: about a third of a phone's vertices in a crowned
-    contact, a tenth in its patch. best: the highest of the heights (``_heights`` returns it)."""
+    contact, a tenth in its patch. best: the highest of the heights (``_heights`` returns it).
+    Each one's (u, w) also goes to heights[k, :2], for ``_feature_again``."""
     ux, uy, uz = u
     wx, wy, wz = w
     m = 0
@@ -491,9 +483,25 @@ def _feature(verts, core, u, w, heights, best, tol, out):
         depth = tol - (best - heights[k, 2])
         if depth >= 0.0 and m < out.shape[0]:
             x, y, z = _world(verts, core, k)
-            out[m, 0] = x * ux + y * uy + z * uz
-            out[m, 1] = x * wx + y * wy + z * wz
-            out[m, 2] = depth
+            pu = x * ux + y * uy + z * uz
+            pw = x * wx + y * wy + z * wz
+            out[m, 0], out[m, 1], out[m, 2] = pu, pw, depth
+            heights[k, 0], heights[k, 1] = pu, pw
+            m += 1
+    return m
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _feature_again(count, heights, best, tol, out):
+    """``_feature`` for a tolerance at most that of the last ``_feature`` on these heights, in the
+    same plane basis: its vertices are among those, whose (u, w) it left in heights[k, :2] (the
+    same figures: the same vertices placed and projected by the same expressions), so none is
+    placed again."""
+    m = 0
+    for k in range(count):
+        depth = tol - (best - heights[k, 2])
+        if depth >= 0.0 and m < out.shape[0]:
+            out[m, 0], out[m, 1], out[m, 2] = heights[k, 0], heights[k, 1], depth
             m += 1
     return m
 
@@ -700,6 +708,7 @@ def feature_hulls(va, a, vb, b, d, n, tol, work):
     u, w = (ux, uy, uz), (wx, wy, wz)
     top_a = _heights(va, a, n, -1.0, tol, work[4])
     top_b = _heights(vb, b, n, 1.0, tol, work[5])
+    work[7, MAX_FEATURE - 1, 0], work[7, MAX_FEATURE - 1, 1] = top_a, top_b  # for patch_moments
     na = _feature(va, a, u, w, work[4], top_a, tol, work[0])
     nb = _feature(vb, b, u, w, work[5], top_b, tol, work[1])
     return _hulls(na, nb, d, tol, work)
@@ -792,10 +801,12 @@ def patch_moments(va, a, vb, b, p_a, p_b, tol, hull_tol, work):
     if tol > hull_tol:
         top_a = _heights(va, a, (nx, ny, nz), -1.0, tol, work[4])
         top_b = _heights(vb, b, (nx, ny, nz), 1.0, tol, work[5])
-    else:
-        top_a, top_b = _top(work[4], a.count), _top(work[5], b.count)
-    na = _feature(va, a, (ux, uy, uz), (wx, wy, wz), work[4], top_a, tol, work[0])
-    nb = _feature(vb, b, (ux, uy, uz), (wx, wy, wz), work[5], top_b, tol, work[1])
+        na = _feature(va, a, (ux, uy, uz), (wx, wy, wz), work[4], top_a, tol, work[0])
+        nb = _feature(vb, b, (ux, uy, uz), (wx, wy, wz), work[5], top_b, tol, work[1])
+    else:  # the patch's vertices are among the crown's, already projected
+        top_a, top_b = work[7, MAX_FEATURE - 1, 0], work[7, MAX_FEATURE - 1, 1]
+        na = _feature_again(a.count, work[4], top_a, tol, work[0])
+        nb = _feature_again(b.count, work[5], top_b, tol, work[1])
     if na == 1 or nb == 1:
         return 0.0, 0.0, 0.0
     ha, hb, eps = _hulls(na, nb, d, tol, work)
