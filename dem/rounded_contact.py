@@ -320,7 +320,7 @@ def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, w
     return delta, d, ex, ey, ez, cx, cy, cz, s_uu, s_uw, s_ww
 
 
-@numba.njit(**JIT_FLAGS)
+@numba.njit(**STEP_FLAGS)
 def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     """Contact of rounded shape A (core ``a`` of the vertex array va, rounding radius ``ra``,
     crown ``crown_a``) with a ``WallFacet`` of the triangle array ``tri``: ``(delta, d, nx, ny,
@@ -328,9 +328,12 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
     distance over the triangles, ``dem.crown``) and c its contact point. ``is_face``: the closest
     point of the facet is inside it (not on its boundary). When apart (delta <= 0), d may be a
     lower bound of the distance rather than the distance.
+
+    Compiled without numba's runtime, as the callers: the usual cases (apart, or a piece over the
+    inside of the facet) borrow their arrays without a reference count; the triangles one by one
+    (``_facet_triangles``) allocate their tables.
     """
     disp, normal, offset = facet.disp, facet.normal, facet.offset
-    t_start, t_count = facet.start, facet.count
     shift = normal[0] * disp[0] + normal[1] * disp[1] + normal[2] * disp[2]
     lo, hi, lowest = _extent(va, a, normal[0], normal[1], normal[2])
     if lo - (offset + shift) > ra or (offset + shift) - hi > ra:
@@ -342,6 +345,15 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
         box, m = _footprint(va, a, facet, ra + tol - (lo - offset - shift), work[6])
         if _inside_facet(tri, facet, box, work[6], m):
             return _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work)
+    return _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work)
+
+
+@numba.njit(**JIT_FLAGS)
+def _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work):
+    """``facet_geometry`` over the facet's triangles one by one (the piece is not over its inside
+    or reaches below its plane)."""
+    disp, normal, offset = facet.disp, facet.normal, facet.offset
+    t_start, t_count = facet.start, facet.count
     # Each triangle's distance and closest points, computed once for the three passes below. A
     # triangle farther than ra + tol from the ball about the body's centre that holds the core
     # cannot hold the contact (its crowned distance is at least its distance): no GJK for it.
