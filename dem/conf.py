@@ -34,7 +34,8 @@ if _RUNTIME_OPTION:
 
 # The step loop (``dem.loop._steps``), ``compute_forces``, ``evaluate_into`` and the contact
 # geometry kernels that allocate nothing (``dem/convex.py``, ``dem/crown.py``,
-# ``dem/rounded_contact.py``; not GJK nor ``facet_geometry``, which allocate) are compiled
+# ``dem/rounded_contact.py``, GJK in the caller's scratch ``gjk_query``; not ``gjk_distance`` nor
+# the facet's triangles one by one, ``_facet_triangles``, which allocate) are compiled
 # without numba's runtime (``_nrt=False``): no atomic reference count up and down for each array
 # they bind (their container arguments, every ``bodies.pos`` read, every view), which numba's
 # pruning left at about 150 pairs a step, 97 % of a one-sphere step (``benchmarks/README.md``,
