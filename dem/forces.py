@@ -329,6 +329,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                 pairs.axis[p],
                 pairs.simplex[p],
                 work,
+                pp_hist[p, 0] != 0.0 or pp_hist[p, 1] != 0.0 or pp_hist[p, 2] != 0.0,  # touched last step
             )
             if delta <= 0.0:
                 pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0

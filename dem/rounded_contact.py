@@ -46,6 +46,7 @@ import numpy as np
 
 from dem.conf import JIT_FLAGS, STEP_FLAGS
 from dem.convex import (
+    SIMPLEX,
     Core,
     contact_patch,
     gjk_query,
@@ -60,6 +61,9 @@ from dem.facets import closest_point_on_triangle
 
 IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # walls translate, never turn
 NO_CROWN = (0.0, 0.0, 0.0)  # a facet's
+# pair_geometry's GJK-first path defers to the cached-axis test within this fraction of the reach
+# and the coordinates' size of touching (the test's rounding is a few 1e-16 of the coordinates)
+AXIS_BAND = 1e-9
 
 
 class WallFacet(NamedTuple):
@@ -272,7 +276,7 @@ def _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
+def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work, touching=False):
     """Contact of rounded shapes A and B (cores ``a`` and ``b`` of the vertex arrays va and vb,
     rounding radii ``ra`` and ``rb``, crowns ``crown_*``): ``(delta, d, nx, ny, nz, cx, cy, cz,
     s_uu, s_uw, s_ww)``, delta the crowned overlap and c its contact point
@@ -282,15 +286,40 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
     intersect (an overlap beyond the rounding; the caller reports it). ``axis`` (3,) is the
     pair's cached separating direction, from B to A, and ``simplex`` (``dem.convex.SIMPLEX``
     ints) its last GJK simplex, GJK's warm start; both updated here.
+
+    ``touching``: the pair touched at the last step (a hint; the result does not depend on it).
+    The cached axis is then taken after GJK instead of before, and only where GJK leaves the
+    cores apart or within the axis test's rounding of it (``AXIS_BAND``, far above it): cores
+    closer than the reach are no further apart along any axis, so that test would have passed,
+    and where it would not have, the axis and simplex GJK changed are put back and the test's
+    answer is returned, as before. The same results and state to the bit, without the test's two
+    passes over the cores for a resting contact.
     """
     reach = ra + rb
     if axis[0] != 0.0 or axis[1] != 0.0 or axis[2] != 0.0:
+        ux, uy, uz = axis[0], axis[1], axis[2]
+        kept = (simplex[0], simplex[1], simplex[2], simplex[3], simplex[4], simplex[5], simplex[6])
+        near = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        if touching:
+            near = _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work)
+            # the axis test's rounding: a few 1e-16 of the coordinates
+            scale = (
+                abs(a.pos[0]) + abs(a.pos[1]) + abs(a.pos[2]) + abs(b.pos[0]) + abs(b.pos[1]) + abs(b.pos[2])
+            )
+            if 0.0 < near[1] <= reach - AXIS_BAND * (reach + scale):
+                return near
         # A's lowest and B's highest point along the axis: one support query each.
-        lx, ly, lz = support(va, a, -axis[0], -axis[1], -axis[2])
-        hx, hy, hz = support(vb, b, axis[0], axis[1], axis[2])
-        gap = (lx * axis[0] + ly * axis[1] + lz * axis[2]) - (hx * axis[0] + hy * axis[1] + hz * axis[2])
+        lx, ly, lz = support(va, a, -ux, -uy, -uz)
+        hx, hy, hz = support(vb, b, ux, uy, uz)
+        gap = (lx * ux + ly * uy + lz * uz) - (hx * ux + hy * uy + hz * uz)
         if gap > reach:
+            if touching:
+                axis[0], axis[1], axis[2] = ux, uy, uz
+                for k in range(SIMPLEX):
+                    simplex[k] = kept[k]
             return reach - gap, gap, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        if touching:
+            return near
     return _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work)
 
 

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from dem.convex import SIMPLEX, gjk_distance, place, scratch
+from dem.convex import SIMPLEX, gjk_distance, place, scratch, support
 from dem.facets import build_facets
 from dem.polyhedra import Polyhedron
 from dem.quaternion import from_axis_angle, matrix
@@ -222,6 +222,60 @@ def test_gjk_warm_started_from_any_cached_simplex_gives_the_cold_answer(seed):
         gap = np.array(warm[1:4]) - np.array(warm[4:7])
         assert np.linalg.norm(gap) == pytest.approx(cold[0], rel=1e-12)
         assert gap @ (np.array(cold[1:4]) - np.array(cold[4:7])) == pytest.approx(cold[0] ** 2, rel=1e-9)
+
+
+def test_a_pair_that_touched_gives_the_same_answer_and_state_with_gjk_first():
+    """``pair_geometry(..., touching=True)`` runs GJK before the cached-axis test (which a resting
+    contact always passes) and takes the test only where GJK leaves the cores apart or nearly so:
+    its answer, axis and simplex must be those of the test first, to the bit, for boxes pressed
+    together, just touching, within the rounding of the axis test, and moved apart (whose cached
+    axis then rejects them, the axis and simplex that GJK changed put back)."""
+    rng = np.random.default_rng(21)
+    kinds = {"touching": 0, "apart, axis rejects": 0, "apart, gjk": 0}
+    reach = 2.0 * BOX.rounding
+    for _ in range(400):
+        rot_a = matrix(from_axis_angle(rng.normal(size=3), rng.choice([0.0, 1e-3, rng.uniform(0, math.pi)])))
+        rot_b = matrix(from_axis_angle(rng.normal(size=3), rng.choice([0.0, rng.uniform(0, math.pi)])))
+        up = rng.normal(size=3) * np.array([0.3, 0.3, 1.0])
+        up /= np.linalg.norm(up)
+        a0, b = place(0, 8, rot_a, np.zeros(3)), place(0, 8, rot_b, np.zeros(3))
+        far = np.asarray(support(BOX.core, b, *up)) - np.asarray(support(BOX.core, a0, *(-up)))
+        # the last step: pressed together; now: moved along (and across) the normal by up to 2 reach
+        pos_last = far + up * (reach - rng.uniform(0.0, 0.5) * BOX.rounding)
+        axis, simplex = np.zeros(3), np.zeros(SIMPLEX, np.int32)
+        pair(pos_last, rot_a, np.zeros(3), rot_b, axis, simplex)
+        move = rng.choice([-1e-4, 1e-9, 0.6, 1.0, 2.0]) * BOX.rounding
+        pos = pos_last + up * move + rng.normal(size=3) * rng.choice([0.0, 1e-4])
+        results = []
+        for touching in (False, True):
+            ax, sx = axis.copy(), simplex.copy()
+            a = place(0, 8, rot_a, pos)
+            r = pair_geometry(
+                BOX.core,
+                a,
+                BOX.rounding,
+                CROWN,
+                BOX.core,
+                b,
+                BOX.rounding,
+                CROWN,
+                ax,
+                sx,
+                scratch(),
+                touching,
+            )
+            results.append((r, ax, sx))
+        (first, ax0, sx0), (gjk_first, ax1, sx1) = results
+        assert first == gjk_first
+        assert np.array_equal(ax0, ax1) and np.array_equal(sx0, sx1)
+        if first[0] > 0.0:
+            kinds["touching"] += 1
+        elif np.array_equal(ax0, axis) and np.array_equal(sx0, simplex):
+            kinds["apart, axis rejects"] += 1
+        else:
+            kinds["apart, gjk"] += 1
+    assert kinds["touching"] >= 100 and kinds["apart, axis rejects"] >= 100, kinds
+    assert kinds["apart, gjk"] >= 5, kinds
 
 
 def test_a_pieces_box_holds_its_core_along_every_direction():
