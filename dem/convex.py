@@ -100,6 +100,11 @@ def scratch() -> np.ndarray:
     return np.zeros((8, MAX_FEATURE, 3))
 
 
+# work[7]'s last row, past GJK's 10 * _COLUMNS + 12 floats (``gjk_scratch``): the crown's two
+# highest heights, which ``feature_hulls`` leaves for ``patch_moments``
+TOPS_ROW = MAX_FEATURE - 1
+
+
 @numba.njit(inline="always", **JIT_FLAGS)
 def gjk_scratch(work):
     """GJK's simplex rows (10, ``_COLUMNS``) and weights (12,) as views of work[7] (a
@@ -708,7 +713,7 @@ def feature_hulls(va, a, vb, b, d, n, tol, work):
     u, w = (ux, uy, uz), (wx, wy, wz)
     top_a = _heights(va, a, n, -1.0, tol, work[4])
     top_b = _heights(vb, b, n, 1.0, tol, work[5])
-    work[7, MAX_FEATURE - 1, 0], work[7, MAX_FEATURE - 1, 1] = top_a, top_b  # for patch_moments
+    work[7, TOPS_ROW, 0], work[7, TOPS_ROW, 1] = top_a, top_b  # for patch_moments
     na = _feature(va, a, u, w, work[4], top_a, tol, work[0])
     nb = _feature(vb, b, u, w, work[5], top_b, tol, work[1])
     return _hulls(na, nb, d, tol, work)
@@ -804,7 +809,7 @@ def patch_moments(va, a, vb, b, p_a, p_b, tol, hull_tol, work):
         na = _feature(va, a, (ux, uy, uz), (wx, wy, wz), work[4], top_a, tol, work[0])
         nb = _feature(vb, b, (ux, uy, uz), (wx, wy, wz), work[5], top_b, tol, work[1])
     else:  # the patch's vertices are among the crown's, already projected
-        top_a, top_b = work[7, MAX_FEATURE - 1, 0], work[7, MAX_FEATURE - 1, 1]
+        top_a, top_b = work[7, TOPS_ROW, 0], work[7, TOPS_ROW, 1]
         na = _feature_again(a.count, work[4], top_a, tol, work[0])
         nb = _feature_again(b.count, work[5], top_b, tol, work[1])
     if na == 1 or nb == 1:
