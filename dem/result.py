@@ -52,6 +52,14 @@ class SimulationResult(BaseModel):
     cost: float = Field(
         0.0, ge=0, description="Machine-independent cost: sum over steps of (spheres + contacts)."
     )
+    full_load_factor: float = Field(
+        1.0,
+        ge=1.0,
+        description="The protocol's body-seconds over this run's: how much more work the whole "
+        "protocol would take with every body kept to its end (1 when none left early). A run that "
+        "empties the tray stops early and does less work; T x this factor prices the parameters, "
+        "not the outcome (optimizer/objectives.py).",
+    )
     max_overlap: float | None = Field(
         None,
         ge=0,

@@ -43,6 +43,13 @@ def test_outlet_wider_than_every_item_discharges_everything():
     assert all(t is not None and SHORT["vibration_start"] < t for t in result.discharge_times)
     assert result.emptied_at == pytest.approx(max(result.discharge_times))
     assert result.sim_time < config.stages.end  # stop_when_empty ended the run early
+    # Priced as the whole protocol: the items' seconds to the end over their seconds in the tray,
+    # each inserted on schedule (the tray is empty, nothing waits for room) to within a time step.
+    inserted = [i * SHORT["insertion_time"] / 3 for i in range(3)]
+    protocol = sum(config.stages.end - t for t in inserted)
+    in_tray = sum(left - t for left, t in zip(result.discharge_times, inserted, strict=True))
+    assert result.full_load_factor == pytest.approx(protocol / in_tray, rel=1e-4)
+    assert result.full_load_factor > 1.5
 
 
 def test_outlet_narrower_than_every_item_retains_everything():
@@ -61,6 +68,7 @@ def test_outlet_narrower_than_every_item_retains_everything():
     assert result.discharge_times == [None, None, None]
     assert result.emptied_at is None
     assert result.sim_time == pytest.approx(config.stages.end, abs=1e-3)
+    assert result.full_load_factor == pytest.approx(1.0, abs=1e-9)  # every item stayed to the end
 
 
 def _rng(seed: int) -> np.random.Generator:

@@ -14,7 +14,8 @@ PARAMS = {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.5}
 
 
 def record(
-    individual, replicate, status="ok", n_remaining=4, wall=10.0, cost=1e6, message="", overlap=None
+    individual, replicate, status="ok", n_remaining=4, wall=10.0, cost=1e6, message="", overlap=None,
+    factor=1.0,
 ):
     spec = TrialSpec(f"s-{individual}-{replicate}", "s", individual, 0, replicate, replicate, PARAMS, {})
     result = SimulationResult(
@@ -25,6 +26,7 @@ def record(
         n_remaining=n_remaining if status == "ok" else None,
         wall_time_s=wall,
         cost=cost,
+        full_load_factor=factor,
     )
     return TrialRecord(spec, TrialState.DONE, result)
 
@@ -48,6 +50,18 @@ def test_f2_is_the_mean_cost_or_the_mean_wall_time():
 
     assert by_cost.f2 == 200.0
     assert by_wall.f2 == 15.0
+
+
+def test_f2_prices_the_whole_protocol_of_a_run_that_stopped_early():
+    # A run whose tray emptied did half the protocol's item-seconds: its f2 is what the whole
+    # protocol would cost, so emptying the tray is not rewarded as speed.
+    records = [record(0, 0, wall=10.0, cost=100.0, factor=2.0), record(0, 1, wall=20.0, cost=300.0)]
+
+    [by_cost] = evaluate(records, make_definition(replicates=2, objective_time="cost"), 30)
+    [by_wall] = evaluate(records, make_definition(replicates=2, objective_time="wall"), 30)
+
+    assert by_cost.f2 == by_cost.cost == (200.0 + 300.0) / 2
+    assert by_wall.f2 == by_wall.wall_time_s == (20.0 + 20.0) / 2
 
 
 def test_wasserstein_distance_of_one_replicate_is_its_mean_absolute_difference():
