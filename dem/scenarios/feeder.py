@@ -382,9 +382,10 @@ class _FeederRun:
 
     def _full_load_factor(self) -> float:
         """The protocol's item-seconds (each item from its insertion to ``stages.end``) over the
-        run's (to its discharge, or to where the run stopped). Across the feeder's runs the work
-        per item-second varies by about 3 % (benchmarks/README: calibration 16), so this factor
-        times the run's cost is the cost of the full 65 s protocol the paper's T measured."""
+        run's (to its discharge, or to where the run stopped). In four paper studies the work per
+        item-second was the same within 1.4 % whatever N_t (``benchmarks/cost_coupling.py``), so
+        this factor times the run's cost is the cost of the full 65 s protocol, which the paper's
+        T measured."""
         end, now = self.config.stages.end, float(self.sim.t)
         run = protocol = 0.0
         for inserted, left in zip(self.inserted_at, self.discharge_times, strict=True):
