@@ -36,7 +36,9 @@ def runs(archive: dict) -> np.ndarray:
         times = result["discharge_times"]
         n = len(times)
         stop = result["sim_time"]
-        item_seconds = sum((stop if left is None else left) - i * insertion / n for i, left in enumerate(times))
+        item_seconds = sum(
+            (stop if left is None else left) - i * insertion / n for i, left in enumerate(times)
+        )
         rows.append((
             np.log10(trial["params"]["E"]),
             result["n_remaining"],
