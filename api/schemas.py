@@ -211,6 +211,11 @@ class GenerationSummary(_Wire):
     wall_time_s: Spread | None
     cost: Spread | None
     best_f1: float | None
+    w1_to_experiment: dict[str, float | None] = Field(
+        default_factory=dict,
+        description="Per response, the Wasserstein-1 distance from the generation's measured runs "
+        "to the experiment's values (None before any run measured).",
+    )
 
 
 class ParetoPoint(_Wire):

@@ -2,7 +2,11 @@
 ``GET /studies/{id}/generations`` and the results folder's ``summary.json``: for each batch, its
 runs, how many finished, measured and failed (by status), and the median and spread of each
 response, the wall time and the cost over the runs that measured (a failed run's values are
-where it stopped, never a measurement), with the best f1 stored for its runs.
+where it stopped, never a measurement), with the best f1 stored for its runs. Given the
+experiments' measured values, also each response's Wasserstein-1 distance from the generation's
+runs to the experiment: with the feeder's noise (N_t 0-16 over the ten experiments) a median of
+single runs can sit on the target by chance or miss it with the right sets, while the distance
+says how like the experiment the whole generation behaves.
 
 Pure arithmetic on plain runs, so the store's rows and the optimiser's trial records both feed
 it; it must not read stores.
@@ -10,11 +14,12 @@ it; it must not read stores.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.stats import wasserstein_distance
 
 from dem.result import SimulationStatus
 from optimizer.outcomes import count_failures
@@ -51,8 +56,12 @@ def spread(values: Iterable[float]) -> dict[str, float] | None:
             "max": float(max(values))}
 
 
-def per_generation(runs: Iterable[Run]) -> list[dict[str, Any]]:
-    """One entry per generation that has runs, in order (see the module docstring)."""
+def per_generation(
+    runs: Iterable[Run], measured_by_experiment: Mapping[str, Sequence[float]] | None = None
+) -> list[dict[str, Any]]:
+    """One entry per generation that has runs, in order (see the module docstring);
+    ``measured_by_experiment`` maps a response to the experiment's measured values."""
+    experiments = measured_by_experiment or {}
     by_generation: dict[int, list[Run]] = {}
     for run in runs:
         by_generation.setdefault(run.generation, []).append(run)
@@ -75,5 +84,9 @@ def per_generation(runs: Iterable[Run]) -> list[dict[str, Any]]:
             "wall_time_s": spread(run.wall_time_s for run in ok if run.wall_time_s is not None),
             "cost": spread(run.cost for run in ok if run.cost is not None),
             "best_f1": min(f1_values, default=None),
+            "w1_to_experiment": {
+                name: float(wasserstein_distance(measured[name], values)) if measured.get(name) else None
+                for name, values in experiments.items()
+            },
         })
     return summaries

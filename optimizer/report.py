@@ -144,7 +144,10 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
             "simulations": entry["done"],
             "f2": spread(ev.f2 for ev in evaluations if ev.generation == entry["generation"] and ev.ok),
         }
-        for entry in per_generation(Run.of(record) for record in records if record.result is not None)
+        for entry in per_generation(
+            (Run.of(record) for record in records if record.result is not None),
+            definition.measured_by_response(),
+        )
     ]
     return {
         "study_id": study.study_id,

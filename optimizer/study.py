@@ -400,6 +400,10 @@ class StudyDefinition(_Strict):
         """The first experiment (the only one in most studies)."""
         return self.experiments[0]
 
+    def measured_by_response(self) -> dict[str, list[float]]:
+        """Each experiment's measured values, by the response it measures."""
+        return {experiment.response: list(experiment.measured) for experiment in self.experiments}
+
     def match_tolerance(self) -> float:
         """f1 at or below which a parameter set matches: the experiment's tolerance, or 1 when
         several experiments are combined (each distance is divided by its own tolerance)."""

@@ -172,7 +172,11 @@ def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> 
             row.wall_time_s, row.cost, _objectives(row)[0])
         for row in store.trial_columns(study_id)
     )
-    return [GenerationSummary.model_validate(entry) for entry in per_generation(runs)]
+    definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
+    return [
+        GenerationSummary.model_validate(entry)
+        for entry in per_generation(runs, definition.measured_by_response())
+    ]
 
 
 def recommendation_json(

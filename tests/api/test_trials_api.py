@@ -8,6 +8,7 @@ import io
 import statistics
 
 import pytest
+from scipy.stats import wasserstein_distance
 
 from optimizer.driver import Driver
 from optimizer.memory import SyntheticExecutor
@@ -131,6 +132,10 @@ def test_generation_summary_gives_median_and_spread_per_generation(client, keys,
     assert summary[0]["n_remaining"]["min"] == min(n_t_gen0)
     wall = summary[0]["wall_time_s"]
     assert wall["q1"] <= wall["median"] <= wall["q3"]
+    measured = StudyDefinition.model_validate(store.load_study(finished).definition).experiment.measured
+    assert summary[0]["w1_to_experiment"]["n_remaining"] == pytest.approx(
+        wasserstein_distance(n_t_gen0, measured)
+    )
 
 
 def test_recommendation_and_equivalent_sets_are_within_tolerance(client, keys, store, finished):
