@@ -341,8 +341,12 @@ def write_pareto_png(
 
     by_generation: dict[int, list[int]] = {}
     failed_by_generation: dict[int, dict[str, int]] = {}
+    w1_by_generation: dict[int, float] = {}
     for entry in summary_json["generations"]:
         failed_by_generation[entry["generation"]] = entry["failed_by_status"]
+        w1 = (entry.get("w1_to_experiment") or {}).get(response)
+        if w1 is not None:
+            w1_by_generation[entry["generation"]] = w1
     for record in records:
         if last_generation is not None and record.spec.generation > last_generation:
             continue  # extra replicates and validation: not a generation of the search
@@ -352,6 +356,14 @@ def write_pareto_png(
     generations = sorted(by_generation)
     if generations:
         right.boxplot([by_generation[g] for g in generations], positions=generations)
+        # Each generation's W1 to the experiment along the top: a median of noisy single runs
+        # can sit on the target by chance; the distance says how like the experiment they are.
+        along_top = right.get_xaxis_transform()
+        right.text(generations[0] - 0.5, 1.01, "W1", transform=along_top, ha="right", va="bottom", fontsize=6)
+        for g in generations:
+            if g in w1_by_generation:
+                right.text(g, 1.01, f"{w1_by_generation[g]:.1f}", transform=along_top, ha="center",
+                           va="bottom", fontsize=6)
     right.axhline(summary_json["target"], color="tab:red", ls="--", lw=1, label="target")
     right.set_xlabel("generation")
     right.set_ylabel(f"measured {response} (ok runs)")

@@ -302,13 +302,15 @@ def _report(console, store, study_id: str, results: Path) -> None:
         console.print(
             f"[bold green]Recommended[/] (individual {recommendation['individual']}, fastest match): "
             f"{params}; "
-            f"{response} {recommendation['n_remaining']}, {recommendation['wall_time_s']:.1f} s wall"
+            f"{response} {recommendation['n_remaining']}, {recommendation['wall_time_s']:.1f} s wall "
+            "for the whole protocol"
         )
         for other in summary["equivalent"]:
             params = ", ".join(f"{name} = {value:.4g}" for name, value in other["params"].items())
             console.print(
                 f"  equivalent (individual {other['individual']}): {params}; f2 {_figure(other['f2'])}"
             )
+    _generations_line(console, summary, response)
     _report_progress(console, summary["progress"], summary["identifiability"])
     _validation_table(console, summary)
     first = summary["simulations_until_first_match"]
@@ -317,6 +319,22 @@ def _report(console, store, study_id: str, results: Path) -> None:
         f"{summary['simulations']} simulations ({summary['failures']['text']}); {matched}. "
         f"Results in {folder}/"
     )
+
+
+def _generations_line(console, summary: dict, response: str) -> None:
+    """The paper's Fig. 5 in two lines: the median of each generation's measured runs, and how
+    far the generation's runs lie from the experiment (W1), which the median alone hides."""
+    rows = [entry for entry in summary["generations"] if entry.get("individuals")]
+    if not rows:
+        return
+    medians = " ".join(
+        "-" if entry["n_remaining"] is None else f"{entry['n_remaining']['median']:g}" for entry in rows
+    )
+    w1 = [(entry.get("w1_to_experiment") or {}).get(response) for entry in rows]
+    distances = " ".join("-" if value is None else f"{value:.2f}" for value in w1)
+    target = f"target {summary['target']:g}"
+    console.print(f"per generation: median {response} {medians} ({target})", soft_wrap=True)
+    console.print(f"per generation: W1 to the experiment {distances}", soft_wrap=True)
 
 
 def _n_t(member: dict) -> str:

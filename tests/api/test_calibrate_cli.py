@@ -159,6 +159,12 @@ def test_tiny_study_runs_and_writes_its_results(tmp_path):
     assert len((folder / "trials.csv").read_text().splitlines()) == 1 + 4
     assert (folder / "pareto.png").stat().st_size > 0
     assert "Pareto front" in output
+    # Fig. 5 in two lines, from the summary's generations (two batches of one individual each).
+    search = [g for g in summary["generations"] if g["individuals"]]
+    medians = " ".join(f"{g['n_remaining']['median']:g}" for g in search)
+    distances = " ".join(f"{g['w1_to_experiment']['n_remaining']:.2f}" for g in search)
+    assert f"per generation: median n_remaining {medians} (target" in output
+    assert f"per generation: W1 to the experiment {distances}" in output
     # Every finished trial has its start (a run shorter than a poll, never seen running, has its
     # end less its wall time) and its local worker.
     with sa.create_engine(f"sqlite:///{tmp_path}/demcal.db").connect() as db:
