@@ -12,6 +12,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+from scipy.stats import wasserstein_distance
 
 from dem.result import SimulationResult, SimulationStatus
 from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, TrialState, trial_id
@@ -303,7 +304,8 @@ def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dash
     open_study(page, dashboard)
 
     traces = page.evaluate(
-        "() => document.getElementById('generation-plot').data.map((t) => ({name: t.name, x: t.x, y: t.y}))"
+        "() => document.getElementById('generation-plot').data.map((t) => "
+        "({name: t.name, x: t.x, y: t.y, w1: t.customdata ?? null}))"
     )
 
     target = next(t for t in traces if t["name"].startswith("experimental target"))
@@ -316,6 +318,16 @@ def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dash
     assert [len(m["x"]) for m in medians] == [5, 5]  # generations 0..4, for N_t and for T
     assert sorted(measured) == medians[0]["x"] == list(range(5))
     assert medians[0]["y"] == [statistics.median(measured[g]) for g in range(5)]
+    # Each generation's W1 to the experiment, in the hover and along the panel's top (as scipy's).
+    definition = parse_study(dashboard.store.load_study(dashboard.study.study_id).definition)
+    experiment = definition.experiment.measured
+    w1 = [wasserstein_distance(measured[g], experiment) for g in range(5)]
+    assert medians[0]["w1"] == pytest.approx(w1)
+    assert medians[1]["w1"] is None  # T has no experiment
+    labels = page.evaluate(
+        "() => document.getElementById('generation-plot').layout.annotations.map((a) => a.text)"
+    )
+    assert [f"{d:.1f}" for d in w1] == labels[labels.index("W1") + 1:labels.index("W1") + 6]
 
 
 def test_clicking_a_pareto_point_opens_its_trial(page, dashboard):

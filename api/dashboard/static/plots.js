@@ -44,6 +44,21 @@ function median(values) {
   return v.length % 2 ? v[mid] : (v[mid - 1] + v[mid]) / 2;
 }
 
+// Wasserstein-1 distance between two samples: the area between their distribution functions.
+export function wasserstein1(a, b) {
+  const u = a.filter(Number.isFinite).sort((x, y) => x - y);
+  const v = b.filter(Number.isFinite).sort((x, y) => x - y);
+  if (!u.length || !v.length) return null;
+  const all = [...u, ...v].sort((x, y) => x - y);
+  let i = 0, j = 0, area = 0;
+  for (let k = 0; k < all.length - 1; k++) {
+    while (i < u.length && u[i] <= all[k]) i++;
+    while (j < v.length && v[j] <= all[k]) j++;
+    area += Math.abs(i / u.length - j / v.length) * (all[k + 1] - all[k]);
+  }
+  return area;
+}
+
 function byGeneration(trials, value) {
   const groups = new Map();
   for (const t of trials) {
@@ -53,7 +68,7 @@ function byGeneration(trials, value) {
     groups.get(t.generation).push(x);
   }
   const generations = [...groups.keys()].sort((a, b) => a - b);
-  return { x: generations, y: generations.map((g) => median(groups.get(g))) };
+  return { x: generations, y: generations.map((g) => median(groups.get(g))), groups };
 }
 
 // customdata[5] holds the trial's responses as text ("N<sub>t</sub> = 3 items"), one line each.
@@ -257,20 +272,28 @@ export function generationFigure(trials, responses, maxGeneration) {
     customdata: hover, hovertemplate: HOVER,
     marker: { size: 5, color: "#56b4e9", opacity: 0.7, line: { width: 0.5, color: "#0072b2" } },
   });
-  const medianTrace = (value, axisSuffix) => {
+  // A response's medians carry each generation's W1 to the experiment's values: a median of noisy
+  // single runs can sit on the target by chance, the distance says how like the experiment the
+  // generation's runs are (the same figure as GET /generations and summary.json).
+  const distances = [];
+  const medianTrace = (value, axisSuffix, measured) => {
     const m = byGeneration(done, value);
+    const w1 = measured?.length ? m.x.map((g) => wasserstein1(m.groups.get(g), measured)) : null;
+    if (w1) distances.push({ axisSuffix, x: m.x, w1 });
     return {
       type: "scatter", mode: "lines+markers", name: "median per generation", showlegend: axisSuffix === "",
       x: m.x, y: m.y, xaxis: "x" + axisSuffix, yaxis: "y" + axisSuffix,
       line: { color: MEDIAN, width: 3 }, marker: { size: 8, color: MEDIAN },
-      hovertemplate: "generation %{x}<br>median %{y:.3g}<extra></extra>",
+      customdata: w1 ?? undefined,
+      hovertemplate: "generation %{x}<br>median %{y:.3g}" +
+        (w1 ? "<br>W1 to the experiment %{customdata:.2f}" : "") + "<extra></extra>",
     };
   };
   const suffixOf = (i) => (i === 0 ? "" : String(i + 3));
   const data = [];
   responses.forEach((r, i) => {
     const value = (t) => measuredValue(t, r);
-    data.push(points(done.map(value), suffixOf(i)), medianTrace(value, suffixOf(i)));
+    data.push(points(done.map(value), suffixOf(i)), medianTrace(value, suffixOf(i), r.experiment?.measured));
     if (i === 0) data.push(points(done.map((t) => t.wall_time_s), "2"), medianTrace((t) => t.wall_time_s, "2"));
   });
   const none = noneHtml(responses);
@@ -337,6 +360,13 @@ export function generationFigure(trials, responses, maxGeneration) {
       layout["yaxis" + suffixOf(i)].anchor = "x" + suffixOf(i);
     }
   });
+  for (const { axisSuffix, x, w1 } of distances) {
+    const at = (g, text) => ({
+      xref: "x" + axisSuffix, yref: `y${axisSuffix} domain`, x: g, y: 1, yanchor: "bottom",
+      showarrow: false, text, font: { size: 10, color: INK },
+    });
+    layout.annotations.push(at(x[0] - 0.55, "W1"), ...x.map((g, k) => at(g, w1[k] === null ? "" : w1[k].toFixed(1))));
+  }
   layout.xaxis3.showticklabels = false;
   layout.xaxis3.anchor = "y3";
   layout.xaxis2.anchor = "y2";
