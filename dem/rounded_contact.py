@@ -60,7 +60,7 @@ from dem.crown import crowned_contact
 from dem.facets import closest_point_on_triangle
 
 IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # walls translate, never turn
-NO_CROWN = (0.0, 0.0, 0.0)  # a facet's
+NO_CROWN = (0.0, 0.0, 0.0)  # a wall facet is flat: kappa = 0, so phi = 0 on it (dem/crown.py)
 # pair_geometry's GJK-first path defers to the cached-axis test within this fraction of the reach
 # and the coordinates' size of touching (the test's rounding is a few 1e-16 of the coordinates)
 AXIS_BAND = 1e-9
