@@ -5,10 +5,12 @@ machine); rounded polyhedra at most 1.5x the clumps' time, and a run
 that clogs (``--clogging``: e 0.2, mu 0.9, no early stop) in <= 30 s on one core (issue 12).
 
     NUMBA_NUM_THREADS=1 python benchmarks/feeder.py [--E 1e7 1e8] [--seed 1] [--vibration-time 60]
-        [--representation polyhedron clump] [--clogging]
+        [--representation polyhedron clump] [--clogging] [--core-tolerance 0.1 0]
 
 Not a test: timings depend on the machine. ``--vibration-time`` shortens the vibration stage to
-extrapolate when the full run is too slow (say so when you report it).
+extrapolate when the full run is too slow (say so when you report it). ``--core-tolerance``
+runs the polyhedra once per value (``items.core_tolerance``: the cores' simplification as a
+fraction of the rounding r; 0 keeps every core vertex up to 48, as before session 15), in turn.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ def main() -> None:
     parser.add_argument("--config", default="examples/feeder.toml")
     parser.add_argument("--representation", nargs="+", default=["polyhedron", "clump"])
     parser.add_argument("--clogging", action="store_true", help="e 0.2, mu 0.9: items stay")
+    parser.add_argument("--core-tolerance", type=float, nargs="+", default=None)
     args = parser.parse_args()
     config = load_feeder_config(args.config)
     if args.vibration_time is not None:
@@ -41,8 +44,15 @@ def main() -> None:
         f"{'shape':>10} {'E, Pa':>8} {'wall, s':>8} {'cpu, s':>7} {'sim, s':>7} {'steps':>9} {'dt, s':>9}"
     )
     print(f"{header} {'us/step':>8} {'N_t':>4} status")
-    for representation in args.representation:
+    tolerances = args.core_tolerance or [config.items.core_tolerance]
+    runs = [
+        (rep, tol) for rep in args.representation for tol in (tolerances if rep == "polyhedron" else [None])
+    ]
+    for representation, tolerance in runs:
         config.items.representation = representation
+        if tolerance is not None:
+            config.items.core_tolerance = tolerance
+            print(f"polyhedra, core_tolerance {tolerance} r", flush=True)
         for E in args.E:
             started, cpu = time.perf_counter(), time.process_time()
             r = run_feeder(config, {"E": E, **params}, args.seed)

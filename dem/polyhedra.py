@@ -25,12 +25,16 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
-from dem.convex import MAX_FEATURE
+from dem.convex import MAX_FEATURE, gjk_distance, place
 from dem.frames import smallest_singular_value, transform
 from dem.mesh import MeshError, mass_properties
 
 ROUNDING_FRACTION = 0.25  # default r as a fraction of a piece's thinnest dimension
 MAX_CORE_VERTICES = 48  # a core with more vertices is simplified (support queries cost O(n))
+# A simplified core lies within this fraction of the rounding r of the full core (Hausdorff
+# distance; simplify_core). 0 keeps every vertex (farthest-point sampling down to
+# MAX_CORE_VERTICES beyond), as cores were made before.
+CORE_TOLERANCE = 0.1
 # The crown of a core's faces (dem/crown.py) as its height at the edge of a face as wide as the
 # piece, per unit of that width: R = size / (8 CROWN).
 CROWN = 5e-4
@@ -188,11 +192,14 @@ def make_polyhedron(
     rounding: float | None = None,
     pieces: list[trimesh.Trimesh] | None = None,
     name: str = "",
+    core_tolerance: float = CORE_TOLERANCE,
 ) -> Polyhedron:
     """The rounded polyhedron of a watertight mesh (metres), mass properties from the mesh.
 
     ``pieces`` (convex meshes in the mesh's coordinates) default to ``convex_pieces(mesh)``;
-    ``rounding`` to ``ROUNDING_FRACTION`` of the thinnest piece's thinnest dimension.
+    ``rounding`` to ``ROUNDING_FRACTION`` of the thinnest piece's thinnest dimension;
+    ``core_tolerance`` (a fraction of the rounding) bounds how far each simplified core departs
+    from the full one (``simplify_core``); 0 keeps the full core (up to ``MAX_CORE_VERTICES``).
     """
     properties = mass_properties(mesh, mass=mass, density=density)
     pieces = convex_pieces(mesh) if pieces is None else pieces
@@ -203,10 +210,14 @@ def make_polyhedron(
         rounding = ROUNDING_FRACTION * min(thinnest_dimension(h) for h in hulls)
     if not rounding > 0:
         raise PolyhedronError(f"rounding must be a positive length in metres, got {rounding}")
+    if not 0 <= core_tolerance < 1:
+        raise PolyhedronError(f"core_tolerance is a fraction of the rounding in [0, 1), got {core_tolerance}")
     cores, starts, counts = [], [], []
     for hull in hulls:
         core = shrink_convex(hull, rounding)
-        if len(core) > MAX_CORE_VERTICES:
+        if core_tolerance > 0:
+            core = core[simplify_core(core, core_tolerance * rounding)]
+        elif len(core) > MAX_CORE_VERTICES:
             core = _simplify(core)
         starts.append(sum(counts))
         counts.append(len(core))
@@ -225,6 +236,52 @@ def _assemble(mesh_core, starts, counts, rounding, properties, name) -> Polyhedr
         **properties.body_fields(),
         name=name,
     )
+
+
+def hull_distances(points: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """Distance of each point to the convex hull of ``vertices`` (0 inside), m."""
+    eye, origin = np.eye(3), np.zeros(3)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    hull = place(0, len(vertices), eye, origin)
+    return np.array(
+        [gjk_distance(points, place(k, 1, eye, origin), vertices, hull)[0] for k in range(len(points))]
+    )
+
+
+def simplify_core(core: np.ndarray, tolerance: float) -> np.ndarray:
+    """Rows of ``core`` (the vertices of a convex polytope), ascending, whose hull lies within
+    ``tolerance`` (m) of the whole: greedy insertion. It starts from the vertices extreme along the
+    eight diagonals (+-1, +-1, +-1) of the core's box and adds the vertex furthest from the kept
+    hull until none is further than ``tolerance``. Vertices tied with the furthest (within 1e-9 of
+    the core's size) are added together, and the start is symmetric, so a mirror-symmetric core
+    stays symmetric (a phone's top and bottom faces keep the same outline). The kept hull is inside
+    the core, so the distance of the core's furthest vertex from it is their Hausdorff distance.
+    At most ``MAX_CORE_VERTICES`` are kept: where the tolerance needs more, the insertion stops
+    before the group that would not fit, further than ``tolerance`` from the core."""
+    core = np.asarray(core, dtype=np.float64)
+    if len(core) <= 4:
+        return np.arange(len(core))
+    tie = 1e-9 * float(np.ptp(core, axis=0).max())
+    centre = 0.5 * (core.min(axis=0) + core.max(axis=0))
+    kept: set[int] = set()
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            for sz in (-1.0, 1.0):
+                height = (core - centre) @ np.array([sx, sy, sz])
+                kept.update(np.flatnonzero(height >= height.max() - tie).tolist())
+    while len(kept) < min(len(core), MAX_CORE_VERTICES):
+        rows = np.array(sorted(kept))
+        distance = hull_distances(core, core[rows])
+        distance[rows] = -1.0
+        furthest = float(distance.max())
+        if furthest <= tolerance:
+            break
+        ties = np.flatnonzero(distance >= furthest - tie)
+        if len(kept) + len(ties) > MAX_CORE_VERTICES:
+            break
+        kept.update(int(k) for k in ties)
+    return np.array(sorted(kept))
 
 
 def _simplify(core: np.ndarray) -> np.ndarray:

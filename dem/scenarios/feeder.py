@@ -447,9 +447,15 @@ def make_items(config: ItemsConfig, rng: np.random.Generator) -> list:
             config.spread,
             config.resolution,
             representation=config.representation,
+            core_tolerance=config.core_tolerance,
         )
     return items.default_items(
-        rng, config.counts, config.spread, config.resolution, representation=config.representation
+        rng,
+        config.counts,
+        config.spread,
+        config.resolution,
+        representation=config.representation,
+        core_tolerance=config.core_tolerance,
     )
 
 

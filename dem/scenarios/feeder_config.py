@@ -37,6 +37,14 @@ class ItemsConfig(Section):
         description="Item shape: rounded polyhedra (flat faces, rounded edges) or sphere clumps.",
     )
     resolution: int = Field(12, ge=1, le=400, description="Clump resolution passed to the clump generator.")
+    core_tolerance: float = Field(
+        0.1,
+        ge=0,
+        lt=1,
+        description="Polyhedra: each convex core is simplified to within this fraction of the rounding "
+        "radius r of the full core (Hausdorff distance, inwards only); 0 keeps every core vertex "
+        "(up to 48).",
+    )
     folder: Path | None = Field(None, description="Folder of STL/OBJ item meshes instead of the built-ins.")
     masses: dict[str, float] = Field(
         default_factory=dict, description="Mass per folder mesh stem, kg (an uploaded shape's is its own)."

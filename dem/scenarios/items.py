@@ -54,7 +54,7 @@ import trimesh
 from dem.clump import Clump
 from dem.clumping import DEFAULT_N_SPHERES, deform_clump, make_clump
 from dem.mesh import ALLOWED_FILE_TYPES, MeshError, decimate, load_mesh_file
-from dem.polyhedra import Polyhedron, deform_polyhedron, make_polyhedron
+from dem.polyhedra import CORE_TOLERANCE, Polyhedron, deform_polyhedron, make_polyhedron
 
 logger = logging.getLogger(__name__)
 
@@ -224,10 +224,11 @@ def _shape(
     name: str,
     cache_dir,
     pieces: list[trimesh.Trimesh] | None = None,
+    core_tolerance: float = CORE_TOLERANCE,
 ) -> Polyhedron | Clump:
     """The nominal shape of one kind in the chosen representation."""
     if representation == "polyhedron":
-        return make_polyhedron(mesh, mass=mass, pieces=pieces, name=name)
+        return make_polyhedron(mesh, mass=mass, pieces=pieces, name=name, core_tolerance=core_tolerance)
     if representation == "clump":
         return make_clump(mesh, mass=mass, n_spheres=resolution, name=name, cache_dir=cache_dir)
     raise ItemsError(f"representation {representation!r}; choose one of {', '.join(REPRESENTATIONS)}")
@@ -241,11 +242,13 @@ def default_items(
     *,
     representation: str = DEFAULT_REPRESENTATION,
     cache_dir: str | Path | None | bool = None,
+    core_tolerance: float = CORE_TOLERANCE,
 ) -> list[Item]:
     """The paper's WEEE set (by default 10 + 10 + 10), kind by kind, each item perturbed.
 
     ``representation``: one of ``REPRESENTATIONS``; ``resolution`` is the clump's sphere count
-    (``make_clump(n_spheres=...)``).
+    (``make_clump(n_spheres=...)``); ``core_tolerance`` the polyhedra's core simplification
+    (``make_polyhedron``).
     """
     counts = DEFAULT_COUNTS if counts is None else counts
     items: list[Item] = []
@@ -256,7 +259,9 @@ def default_items(
             continue
         nominal = _spec(kind)
         mesh = _nominal_mesh(kind)
-        shape = _shape(representation, mesh, nominal.mass, resolution, kind, cache_dir, nominal.pieces())
+        shape = _shape(
+            representation, mesh, nominal.mass, resolution, kind, cache_dir, nominal.pieces(), core_tolerance
+        )
         for index, factors in enumerate(_factors(rng, spread, count)):
             spec = nominal.scaled(*factors)
             items.append(_variant(f"{kind}-{index + 1:02d}", kind, mesh, shape, factors, spec.mass, spec))
@@ -296,6 +301,7 @@ def items_from_folder(
     scale: float | None = None,
     representation: str = DEFAULT_REPRESENTATION,
     cache_dir: str | Path | None | bool = None,
+    core_tolerance: float = CORE_TOLERANCE,
 ) -> list[Item]:
     """Items from a folder of STL/OBJ/PLY meshes; kinds are file stems.
 
@@ -341,7 +347,7 @@ def items_from_folder(
             logger.warning("%s: %s", files[stem].name, warning)
         mass = float(masses[stem])
         try:
-            shape = _shape(representation, mesh, mass, resolution, stem, cache_dir)
+            shape = _shape(representation, mesh, mass, resolution, stem, cache_dir, None, core_tolerance)
         except MeshError as exc:
             raise ItemsError(f"{files[stem].name}: {exc}") from exc
         for index, factors in enumerate(_factors(rng, spread, count)):

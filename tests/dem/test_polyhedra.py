@@ -11,8 +11,18 @@ import trimesh
 from scipy.optimize import minimize
 
 from dem.convex import _REL_EPS, contact_patch, gjk_distance, place, scratch
-from dem.polyhedra import Polyhedron, PolyhedronError, convex_pieces, make_polyhedron, shrink_convex
+from dem.polyhedra import (
+    ROUNDING_FRACTION,
+    Polyhedron,
+    PolyhedronError,
+    convex_pieces,
+    make_polyhedron,
+    shrink_convex,
+    simplify_core,
+    thinnest_dimension,
+)
 from dem.quaternion import from_axis_angle, matrix
+from dem.scenarios.items import CATALOGUE
 
 I3 = np.eye(3)
 CUBE = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
@@ -160,6 +170,75 @@ def test_mass_centre_and_inertia_equal_trimeshs():
     assert poly.rounding == pytest.approx(0.0025, rel=1e-9)
     depth = trimesh.proximity.signed_distance(mesh, poly.com + poly.core @ poly.axes.T)
     assert depth.min() == pytest.approx(poly.rounding, rel=1e-6)
+
+
+def distances_to_hull(points, vertices):
+    """Each point's distance to the convex hull of vertices, from the hull's triangles (trimesh's
+    closest point on a triangle; 0 inside), independently of GJK."""
+    hull = trimesh.convex.convex_hull(vertices)
+    triangles = hull.triangles
+    pairs_t = np.repeat(triangles[None], len(points), axis=0).reshape(-1, 3, 3)
+    pairs_p = np.repeat(points, len(triangles), axis=0)
+    gaps = np.linalg.norm(trimesh.triangles.closest_point(pairs_t, pairs_p) - pairs_p, axis=1)
+    gaps = gaps.reshape(len(points), len(triangles)).min(axis=1)
+    offsets = np.sum(hull.face_normals * triangles[:, 0], axis=1)
+    inside = (hull.face_normals @ points.T - offsets[:, None]).max(axis=0)
+    return np.where(inside <= 0.0, 0.0, gaps)
+
+
+def full_cores():
+    """(name, full core, rounding) of every piece of the catalogue's items."""
+    for kind, spec in CATALOGUE.items():
+        hulls = [np.asarray(trimesh.convex.convex_hull(p.vertices).vertices) for p in spec.pieces()]
+        rounding = ROUNDING_FRACTION * min(thinnest_dimension(h) for h in hulls)
+        for k, hull in enumerate(hulls):
+            yield f"{kind}-{k}", shrink_convex(hull, rounding), rounding
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.3])
+def test_a_simplified_core_lies_within_its_tolerance_of_the_full_core(fraction):
+    for name, full, rounding in full_cores():
+        rows = simplify_core(full, fraction * rounding)
+
+        kept = full[rows]
+        assert len(np.unique(rows)) == len(rows) <= 48, name
+        # The kept vertices are the core's own, so their hull lies inside it, and the Hausdorff
+        # distance is the furthest full-core vertex's distance from the kept hull.
+        hausdorff = distances_to_hull(full, kept).max()
+        assert hausdorff <= fraction * rounding * (1 + 1e-9), name
+    # A phone's 104 core vertices come down to 40 at 0.1 r (24 at 0.3 r), its top and bottom
+    # outlines alike (the faces stay flat and parallel).
+    name, full, rounding = next(full_cores())
+    kept = full[simplify_core(full, fraction * rounding)]
+    assert len(full) == 104
+    assert len(kept) == {0.1: 40, 0.3: 24}[fraction]
+    top, bottom = kept[kept[:, 2] > 0], kept[kept[:, 2] < 0]
+    assert len(top) == len(bottom)
+    np.testing.assert_allclose(np.sort(top[:, :2], axis=0), np.sort(bottom[:, :2], axis=0), atol=1e-12)
+
+
+def test_a_tolerance_that_needs_more_than_48_vertices_keeps_at_most_48_symmetric_ones():
+    for name, full, rounding in full_cores():
+        rows = simplify_core(full, 1e-3 * rounding)
+
+        assert len(rows) <= 48, name
+        kept = full[rows]
+        if name == "smartphone-0":  # the next group of 16 (4 corners, 2 faces, 2 sides) would not fit
+            assert len(kept) == 40
+            assert np.sum(kept[:, 2] > 0) == np.sum(kept[:, 2] < 0) == 20
+
+
+def test_a_simplified_core_keeps_the_mesh_mass_properties_and_rounding():
+    spec = CATALOGUE["camera"]
+    full = make_polyhedron(spec.mesh(), mass=spec.mass, pieces=spec.pieces(), core_tolerance=0.0)
+    simple = make_polyhedron(spec.mesh(), mass=spec.mass, pieces=spec.pieces(), core_tolerance=0.1)
+
+    assert list(full.piece_count) == [48, 48]
+    assert list(simple.piece_count) == [8, 32]
+    for key in ("mass", "volume", "rounding"):
+        assert getattr(simple, key) == getattr(full, key), key
+    for key in ("inertia", "com", "axes"):
+        np.testing.assert_array_equal(getattr(simple, key), getattr(full, key), err_msg=key)
 
 
 def test_a_non_convex_mesh_is_decomposed_into_convex_pieces_of_its_volume():
