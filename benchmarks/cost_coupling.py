@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dem.scenarios.feeder import full_load_factor
+
 CLASSES = ((0, 0), (1, 3), (4, 8), (9, 30))
 
 
@@ -34,11 +36,9 @@ def runs(archive: dict) -> np.ndarray:
         if trial.get("status") != "ok" or not result.get("cost"):
             continue
         times = result["discharge_times"]
-        n = len(times)
-        stop = result["sim_time"]
-        item_seconds = sum(
-            (stop if left is None else left) - i * insertion / n for i, left in enumerate(times)
-        )
+        scheduled = [i * insertion / len(times) for i in range(len(times))]
+        protocol_item_seconds = sum(end - t for t in scheduled)
+        item_seconds = protocol_item_seconds / full_load_factor(scheduled, times, result["sim_time"], end)
         rows.append((
             np.log10(trial["params"]["E"]),
             result["n_remaining"],

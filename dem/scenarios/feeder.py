@@ -369,7 +369,11 @@ class _FeederRun:
             steps=int(self.sim.steps),
             dt=float(self.sim.dt),
             cost=float(self.sim.cost),
-            full_load_factor=self._full_load_factor() if status is SimulationStatus.OK else 1.0,
+            full_load_factor=(
+                full_load_factor(self.inserted_at, self.discharge_times, float(self.sim.t), cfg.stages.end)
+                if status is SimulationStatus.OK
+                else 1.0
+            ),
             max_overlap=float(self.sim.max_overlap),
             params=self.params,
             seed=self.seed,
@@ -380,19 +384,20 @@ class _FeederRun:
         return result
 
 
-    def _full_load_factor(self) -> float:
-        """The protocol's item-seconds (each item from its insertion to ``stages.end``) over the
-        run's (to its discharge, or to where the run stopped). In four paper studies the work per
-        item-second was the same within 1.4 % whatever N_t (``benchmarks/cost_coupling.py``), so
-        this factor times the run's cost is the cost of the full 65 s protocol, which the paper's
-        T measured."""
-        end, now = self.config.stages.end, float(self.sim.t)
-        run = protocol = 0.0
-        for inserted, left in zip(self.inserted_at, self.discharge_times, strict=True):
-            if inserted is not None:
-                run += (now if left is None else left) - inserted
-                protocol += end - inserted
-        return max(1.0, protocol / run) if run > 0 else 1.0
+
+def full_load_factor(
+    inserted_at: list[float | None], discharge_times: list[float | None], stopped_at: float, end: float
+) -> float:
+    """The protocol's item-seconds (each item from its insertion to ``end``) over the run's (to
+    its discharge, or to ``stopped_at``). In four paper studies the work per item-second was the
+    same within 1.4 % whatever N_t (``benchmarks/cost_coupling.py``), so this factor times the
+    run's cost is the cost of the full 65 s protocol, which the paper's T measured."""
+    run = protocol = 0.0
+    for inserted, left in zip(inserted_at, discharge_times, strict=True):
+        if inserted is not None:
+            run += (stopped_at if left is None else left) - inserted
+            protocol += end - inserted
+    return max(1.0, protocol / run) if run > 0 else 1.0
 
 
 def softest_valid_E(config: FeederConfig, e: float) -> float:
