@@ -166,13 +166,12 @@ def _sort_key(value: float | None) -> float:
 
 def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> list[GenerationSummary]:
     """``optimizer/generations.py`` on the stored rows (objectives as stored)."""
-    store.get_study(study_id, principal.visible_to)
+    definition = StudyDefinition.model_validate(store.get_study(study_id, principal.visible_to).definition)
     runs = (
         Run(row.generation, row.status if row.state == TrialState.DONE.value else None, row.responses or {},
             row.wall_time_s, row.cost, _objectives(row)[0])
         for row in store.trial_columns(study_id)
     )
-    definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
     return [
         GenerationSummary.model_validate(entry)
         for entry in per_generation(runs, definition.measured_by_response())
