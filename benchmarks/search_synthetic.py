@@ -96,6 +96,7 @@ def searched(
                 "offspring": args.offspring,
                 "generations": generations,
                 "match_estimate": args.estimate,
+                **({"survivors": args.survivors} if args.survivors else {}),
             },
             **({"validation": validation} if validation is not None else {}),
         }
@@ -151,6 +152,7 @@ def main() -> None:
     parser.add_argument("--fig5", action="store_true", help="Median N_t per generation, observed and true.")
     parser.add_argument("--jam", type=float, default=0.0, help="Added to a jam's mean (6: 7-27 items).")
     parser.add_argument("--estimate", choices=("own", "neighbours"), default="own", help="ga.match_estimate")
+    parser.add_argument("--survivors", type=int, help="ga.survivors (default: the whole population)")
     args = parser.parse_args()
     if args.fig5:
         for algorithm in args.algorithms.split(","):

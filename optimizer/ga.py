@@ -24,7 +24,8 @@ rank the same way but lose the spread within the tolerance that NSGA-II's crowdi
 - ``nsga2`` (default): pymoo's NSGA-II, elitist survival by rank and crowding, as the paper's
   MOGA: one-point crossover (``SinglePointCrossover``, probability ``ga.crossover_prob``),
   polynomial mutation with ``ga.mutation_prob`` per gene, binary tournament selection, duplicate
-  elimination. ``ga.population`` individuals first, then ``ga.offspring`` per generation.
+  elimination. ``ga.population`` individuals first, then ``ga.offspring`` per generation, bred
+  from the ``ga.survivors`` that each elitist survival keeps (the paper: 50, 15 and 15).
 - ``spea2``: pymoo's strength Pareto EA (an elitist archive), with the same operators.
   Not offered: SMS-EMOA (pymoo 0.6.2's instance cannot be pickled, so its state could not
   survive a restart) and AGE-MOEA (its numba kernels compile for about 20 s in every process).
@@ -52,6 +53,7 @@ from pymoo.core.population import Population
 from pymoo.core.problem import Problem
 from pymoo.operators.crossover.pntx import SinglePointCrossover
 from pymoo.operators.mutation.pm import PM
+from pymoo.operators.sampling.rnd import FloatRandomSampling
 from pymoo.problems.static import StaticProblem
 
 from optimizer.neighbours import NeighbourEstimate
@@ -99,6 +101,19 @@ class RandomSearch:
         """Nothing to revise: random search keeps no memory of its samples."""
 
 
+class InitialSampling(FloatRandomSampling):
+    """Uniform initial individuals, ``ga.population`` of them even when the survivors are fewer:
+    pymoo otherwise samples as many as it keeps. The draws are the same as pymoo's own sampling of
+    that many, so the initial population does not depend on ``ga.survivors``."""
+
+    def __init__(self, size: int):
+        super().__init__()
+        self.size = size
+
+    def _do(self, problem, n_samples, **kwargs):
+        return super()._do(problem, self.size, **kwargs)
+
+
 class EvaluatedDuplicateElimination(DefaultDuplicateElimination):
     """pymoo's duplicate check, also against every set already simulated. pymoo compares offspring
     only with the living population, so crossover recreated sets that had died out: 29 of 205 sets
@@ -128,7 +143,8 @@ class PymooSearch:
     ):
         self.estimate = estimate
         operators = dict(
-            pop_size=settings.population,
+            pop_size=settings.survivors_kept(),
+            sampling=InitialSampling(settings.population),
             n_offsprings=settings.offspring,
             crossover=SinglePointCrossover(prob=settings.crossover_prob),
             mutation=PM(prob=1.0, prob_var=settings.mutation_prob),

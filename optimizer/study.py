@@ -258,6 +258,13 @@ class GASettings(_Strict):
     population: int = Field(50, ge=2, description="Initial population (simulated in generation 0).")
     offspring: int = Field(15, ge=1, description="New individuals per generation.")
     generations: int = Field(9, ge=0, description="Generations after the initial population.")
+    survivors: int | None = Field(
+        None,
+        ge=2,
+        description="Individuals the elitist selection carries over to each next generation, the "
+        "parents of its offspring (the paper: 50 initial, 15 carried over). Default: the whole "
+        "population, so that a generation only drops its worst ga.offspring sets.",
+    )
     crossover_prob: float = Field(0.98, ge=0, le=1, description="One-point crossover probability.")
     mutation_prob: float = Field(0.02, ge=0, le=1, description="Polynomial mutation probability per gene.")
     match_estimate: Literal["own", "neighbours"] = Field(
@@ -276,6 +283,27 @@ class GASettings(_Strict):
                 "nothing): remove it or choose a GA"
             )
         return self
+
+    @model_validator(mode="after")
+    def _survivors_of_a_ga(self) -> GASettings:
+        if self.survivors is None:
+            return self
+        if self.algorithm not in ("nsga2", "spea2"):
+            raise ValueError(
+                f"ga.survivors applies to 'nsga2' and 'spea2', not to '{self.algorithm}' (it keeps no "
+                "population): remove it or choose a GA"
+            )
+        if self.survivors > self.population:
+            raise ValueError(
+                f"ga.survivors = {self.survivors} exceeds ga.population = {self.population}: the first "
+                "selection chooses the survivors from the initial population; use at most "
+                f"{self.population}"
+            )
+        return self
+
+    def survivors_kept(self) -> int:
+        """How many sets each survival keeps (the GA's population after generation 0)."""
+        return self.population if self.survivors is None else self.survivors
 
     def individuals(self) -> int:
         return self.population + self.offspring * self.generations

@@ -121,3 +121,38 @@ def test_infeasible_sets_rank_by_violation_and_never_beat_a_feasible_one():
     by_gene = dict(zip(np.round(survivors.get("X")[:, 0], 2), cv, strict=True))
     assert by_gene[0.79] == by_gene[0.81] == 0
     assert 0 < by_gene[0.5] < by_gene[0.15] < by_gene[0.1] < by_gene[0.05]
+
+
+@pytest.mark.parametrize("algorithm", ["nsga2", "spea2"])
+def test_survivors_carry_the_papers_15_of_an_initial_50_without_changing_the_initial_draws(algorithm):
+    """The paper: 50 initial individuals, 15 carried over to each next generation by elitist
+    selection. The initial population is the same draw whatever the number kept."""
+    kept = create_search(GASettings(algorithm=algorithm, population=12, offspring=4, survivors=4), 4, seed=7)
+    whole = create_search(GASettings(algorithm=algorithm, population=12, offspring=4), 4, seed=7)
+
+    first = kept.ask()
+    np.testing.assert_array_equal(first, whole.ask())
+    kept.tell(first, objectives(first), feasible(first))
+    offspring = kept.ask()
+    kept.tell(offspring, objectives(offspring), feasible(offspring))
+
+    assert offspring.shape == (4, 4)
+    survivors = kept.algorithm.pop.get("X")
+    assert len(survivors) == 4
+    # Elitist: the four kept are the four best of the sixteen on the (here single-front-ish) objectives.
+    everyone = np.vstack([first, offspring])
+    best = np.sort(objectives(everyone)[:, 0])[:2]
+    assert np.isin(np.round(best, 12), np.round(objectives(survivors)[:, 0], 12)).all()
+
+
+@pytest.mark.parametrize(
+    ("settings", "fix"),
+    [
+        (dict(population=10, survivors=11), "at most 10"),
+        (dict(algorithm="random", survivors=5), "choose a GA"),
+        (dict(survivors=1), "greater than or equal to 2"),
+    ],
+)
+def test_survivors_beyond_the_population_or_for_a_search_without_one_say_what_fits(settings, fix):
+    with pytest.raises(ValueError, match=fix):
+        GASettings(**settings)
