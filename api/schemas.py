@@ -199,6 +199,12 @@ class Spread(_Wire):
     max: float
 
 
+class ExperimentBand(_Wire):
+    median_5: float = Field(description="5 % point of the median of such a generation.")
+    median_95: float = Field(description="95 % point of the median of such a generation.")
+    w1_95: float = Field(description="95th percentile of its Wasserstein-1 distance to the experiment.")
+
+
 class GenerationSummary(_Wire):
     generation: int
     trials: int
@@ -215,6 +221,12 @@ class GenerationSummary(_Wire):
         default_factory=dict,
         description="Per response, the Wasserstein-1 distance from the generation's measured runs "
         "to the experiment's values (None before any run measured).",
+    )
+    as_experiment: dict[str, ExperimentBand | None] = Field(
+        default_factory=dict,
+        description="Per response, where a generation of as many runs drawn from the experiment "
+        "itself would land (a bootstrap of the measured values): W1 below w1_95 means the "
+        "generation behaves as the experiment does, as far as its runs can tell.",
     )
 
 

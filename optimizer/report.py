@@ -342,11 +342,15 @@ def write_pareto_png(
     by_generation: dict[int, list[int]] = {}
     failed_by_generation: dict[int, dict[str, int]] = {}
     w1_by_generation: dict[int, float] = {}
+    band_by_generation: dict[int, dict[str, float]] = {}
     for entry in summary_json["generations"]:
         failed_by_generation[entry["generation"]] = entry["failed_by_status"]
         w1 = (entry.get("w1_to_experiment") or {}).get(response)
         if w1 is not None:
             w1_by_generation[entry["generation"]] = w1
+        band = (entry.get("as_experiment") or {}).get(response)
+        if band is not None:
+            band_by_generation[entry["generation"]] = band
     for record in records:
         if last_generation is not None and record.spec.generation > last_generation:
             continue  # extra replicates and validation: not a generation of the search
@@ -355,15 +359,26 @@ def write_pareto_png(
             by_generation.setdefault(record.spec.generation, []).append(n)
     generations = sorted(by_generation)
     if generations:
+        # Behind each box, the 5-95 % range of the median of a generation drawn from the experiment
+        # itself: with noisy single runs that is how far a converged generation's median strays.
+        banded = [g for g in generations if g in band_by_generation]
+        for g in banded:
+            band = band_by_generation[g]
+            label = "the experiment's median, 5-95 %" if g == banded[0] else None
+            right.fill_between([g - 0.4, g + 0.4], band["median_5"], band["median_95"], color="tab:red",
+                               alpha=0.12, lw=0, label=label)
         right.boxplot([by_generation[g] for g in generations], positions=generations)
         # Each generation's W1 to the experiment along the top: a median of noisy single runs
         # can sit on the target by chance; the distance says how like the experiment they are.
+        # Bold: below the 95 % point of the experiment's own resamples of as many runs.
         along_top = right.get_xaxis_transform()
         right.text(generations[0] - 0.5, 1.01, "W1", transform=along_top, ha="right", va="bottom", fontsize=6)
         for g in generations:
             if g in w1_by_generation:
+                band = band_by_generation.get(g)
+                alike = band is not None and w1_by_generation[g] <= band["w1_95"]
                 right.text(g, 1.01, f"{w1_by_generation[g]:.1f}", transform=along_top, ha="center",
-                           va="bottom", fontsize=6)
+                           va="bottom", fontsize=6, fontweight="bold" if alike else "normal")
     right.axhline(summary_json["target"], color="tab:red", ls="--", lw=1, label="target")
     right.set_xlabel("generation")
     right.set_ylabel(f"measured {response} (ok runs)")

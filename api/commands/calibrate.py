@@ -330,11 +330,22 @@ def _generations_line(console, summary: dict, response: str) -> None:
     medians = " ".join(
         "-" if entry["n_remaining"] is None else f"{entry['n_remaining']['median']:g}" for entry in rows
     )
-    w1 = [(entry.get("w1_to_experiment") or {}).get(response) for entry in rows]
-    distances = " ".join("-" if value is None else f"{value:.2f}" for value in w1)
+    distances = " ".join(_w1_text(entry, response) for entry in rows)
     target = f"target {summary['target']:g}"
     console.print(f"per generation: median {response} {medians} ({target})", soft_wrap=True)
-    console.print(f"per generation: W1 to the experiment {distances}", soft_wrap=True)
+    console.print(
+        f"per generation: W1 to the experiment {distances} (* below the 95 % point of the experiment's "
+        "own resamples of as many runs: behaves as the experiment)",
+        soft_wrap=True,
+    )
+
+
+def _w1_text(entry: dict, response: str) -> str:
+    w1 = (entry.get("w1_to_experiment") or {}).get(response)
+    if w1 is None:
+        return "-"
+    band = (entry.get("as_experiment") or {}).get(response)
+    return f"{w1:.2f}" + ("*" if band and w1 <= band["w1_95"] else "")
 
 
 def _n_t(member: dict) -> str:

@@ -162,7 +162,11 @@ def test_tiny_study_runs_and_writes_its_results(tmp_path):
     # Fig. 5 in two lines, from the summary's generations (two batches of one individual each).
     search = [g for g in summary["generations"] if g["individuals"]]
     medians = " ".join(f"{g['n_remaining']['median']:g}" for g in search)
-    distances = " ".join(f"{g['w1_to_experiment']['n_remaining']:.2f}" for g in search)
+    distances = " ".join(
+        f"{g['w1_to_experiment']['n_remaining']:.2f}"
+        + ("*" if g["w1_to_experiment"]["n_remaining"] <= g["as_experiment"]["n_remaining"]["w1_95"] else "")
+        for g in search
+    )
     assert f"per generation: median n_remaining {medians} (target" in output
     assert f"per generation: W1 to the experiment {distances}" in output
     # Every finished trial has its start (a run shorter than a poll, never seen running, has its

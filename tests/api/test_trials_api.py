@@ -11,6 +11,7 @@ import pytest
 from scipy.stats import wasserstein_distance
 
 from optimizer.driver import Driver
+from optimizer.generations import experiment_band
 from optimizer.memory import SyntheticExecutor
 from optimizer.objectives import f1_rule
 from optimizer.study import StudyDefinition
@@ -136,6 +137,8 @@ def test_generation_summary_gives_median_and_spread_per_generation(client, keys,
     assert summary[0]["w1_to_experiment"]["n_remaining"] == pytest.approx(
         wasserstein_distance(n_t_gen0, measured)
     )
+    band = experiment_band(measured, len(n_t_gen0))
+    assert summary[0]["as_experiment"]["n_remaining"] == pytest.approx(band)
 
 
 def test_recommendation_and_equivalent_sets_are_within_tolerance(client, keys, store, finished):

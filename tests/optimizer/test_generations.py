@@ -3,9 +3,11 @@ generation's measured runs to the experiment, with failed runs left out."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+from scipy.stats import wasserstein_distance
 
-from optimizer.generations import Run, per_generation
+from optimizer.generations import Run, experiment_band, per_generation
 
 MEASURED = [0, 0, 1, 2, 3, 4, 4, 12, 15, 16]
 
@@ -33,3 +35,34 @@ def test_distance_to_the_experiment_uses_only_the_runs_that_measured():
 
 def test_without_an_experiment_no_distance_is_given():
     assert per_generation([Run(0, "ok", {"n_remaining": 3})])[0]["w1_to_experiment"] == {}
+
+
+@pytest.mark.parametrize("n", [1, 10, 15, 50])
+def test_the_experiments_own_band_is_the_bootstrap_of_its_median_and_w1(n):
+    """The band against a plain bootstrap of the ten values with scipy's W1: same percentiles
+    within the resampling error (4000 draws each)."""
+    rng = np.random.default_rng(5)
+    draws = rng.choice(MEASURED, size=(4000, n))
+    w1 = [wasserstein_distance(draw, MEASURED) for draw in draws]
+
+    band = experiment_band(MEASURED, n)
+
+    assert band["w1_95"] == pytest.approx(np.percentile(w1, 95), rel=0.06)
+    assert band["median_5"] == pytest.approx(np.percentile(np.median(draws, axis=1), 5), abs=1.0)
+    assert band["median_5"] <= 4 <= band["median_95"]  # the experiment's own median lies inside
+    assert experiment_band(list(reversed(MEASURED)), n) == band  # the same band in every view
+
+
+def test_the_band_narrows_with_more_runs_and_each_generation_carries_its_own():
+    runs = [Run(0, "ok", {"n_remaining": v}) for v in [0, 4, 12] * 5] + [Run(1, "ok", {"n_remaining": 4})] * 3
+
+    summary = per_generation(runs, {"n_remaining": MEASURED})
+
+    assert summary[0]["as_experiment"]["n_remaining"] == experiment_band(MEASURED, 15)
+    assert summary[1]["as_experiment"]["n_remaining"] == experiment_band(MEASURED, 3)
+    assert experiment_band(MEASURED, 50)["w1_95"] < experiment_band(MEASURED, 15)["w1_95"] < experiment_band(
+        MEASURED, 3
+    )["w1_95"]
+    # A generation of 15 runs that all measured 4 is no draw from the experiment: W1 beyond the band.
+    alike = per_generation([Run(0, "ok", {"n_remaining": 4})] * 15, {"n_remaining": MEASURED})[0]
+    assert alike["w1_to_experiment"]["n_remaining"] > alike["as_experiment"]["n_remaining"]["w1_95"]
