@@ -165,6 +165,10 @@ class TrialRow(Base):
     engine_options: Mapped[dict[str, Any] | None]
     wall_time_s: Mapped[float | None]
     cost: Mapped[float | None]
+    # The result's full_load_factor (1 until there is one, as a result without it reads): with
+    # wall_time_s and cost it gives the whole protocol's, which f2 ranks (optimizer/objectives.py
+    # protocol_cost), so that the dashboard draws what was ranked without the JSON result (0010).
+    full_load_factor: Mapped[float] = mapped_column(default=1.0, server_default="1")
     dt: Mapped[float | None]
     result: Mapped[dict[str, Any] | None] = mapped_column(deferred=True)
     message: Mapped[str] = mapped_column(sa.Text, default="")

@@ -72,8 +72,20 @@ class TrialRead(_Wire):
     engine: str = Field("numba", description="The engine that runs it.")
     wall_time_s: float | None = Field(None, description="T: wall-clock seconds of the simulation.")
     cost: float | None = Field(None, description="Machine-independent cost of the simulation.")
+    protocol_wall_time_s: float | None = Field(
+        None, description="T of the whole protocol: wall_time_s scaled to the full protocol for a run "
+        "that stopped early (the tray emptied), as f2 prices it (optimizer/objectives.py); "
+        "null before the result."
+    )
+    protocol_cost: float | None = Field(
+        None, description="Cost of the whole protocol, as protocol_wall_time_s; with one replicate, the "
+        "f2 of a study that ranks on cost."
+    )
     f1: float | None = Field(None, description="Objective 1, |N_t - target| (null: not ranked or failed).")
-    f2: float | None = Field(None, description="Objective 2, computation time (null: not ranked or failed).")
+    f2: float | None = Field(
+        None, description="Objective 2: the cost or T of the whole protocol (the study's objective_time), "
+        "mean over the set's replicates (null: not ranked or failed)."
+    )
     pareto: bool
     worker: str | None = None
     attempts: int

@@ -47,6 +47,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from scipy.stats import wasserstein_distance
@@ -185,12 +186,21 @@ def response_values(
     }
 
 
-def protocol_wall_time(result: SimulationResult) -> float:
+class RunTimes(Protocol):
+    """What the protocol's times are made of: a ``SimulationResult``, or a stored trial's columns
+    (``api/store/reads.py``), so that the views price a run as the search does."""
+
+    wall_time_s: float
+    cost: float
+    full_load_factor: float
+
+
+def protocol_wall_time(result: RunTimes) -> float:
     """The wall seconds the whole protocol would take at this run's pace (``full_load_factor``)."""
     return result.wall_time_s * result.full_load_factor
 
 
-def protocol_cost(result: SimulationResult) -> float:
+def protocol_cost(result: RunTimes) -> float:
     """The cost the whole protocol would take at this run's work per body-second."""
     return result.cost * result.full_load_factor
 

@@ -110,9 +110,11 @@ def pareto_front(
 
 
 @router.get("/{study_id}/generations", response_model=list[GenerationSummary])
-def generation_summary(study_id: str, principal: ApiKeyDep, store: StoreDep):
+def generation_summary(
+    study_id: str, principal: ApiKeyDep, store: StoreDep, views: StudyViewsDep, request: Request
+):
     """Median and spread of N_t and T per generation (the paper's Fig. 5)."""
-    return trials.generation_summary(store, study_id, principal)
+    return cached_json(trials.generation_summary_json(store, views, study_id, principal, held(request)))
 
 
 @router.get("/{study_id}/progress", response_model=StudyProgressRead)

@@ -36,6 +36,7 @@ from api.services.generations import latest_generation
 from api.services.views import Served, StudyViewCache
 from api.store import Page, SqlStore, TrialFilter
 from optimizer.generations import Run, per_generation
+from optimizer.objectives import protocol_cost, protocol_wall_time
 from optimizer.outcomes import individual_failures, is_failed, measured_n
 from optimizer.protocols import TrialState
 from optimizer.report import response_column, study_parameter_names, trial_csv_columns
@@ -48,14 +49,23 @@ def _objectives(row) -> tuple[float | None, float | None]:
     return finite_or_none(f1), finite_or_none(f2)
 
 
+def _protocol(row) -> dict[str, float | None]:
+    """The whole protocol's T and cost of a stored run, by the functions f2 is made of (a run
+    that emptied the tray stopped early), None before its result."""
+    return {
+        "protocol_wall_time_s": None if row.wall_time_s is None else protocol_wall_time(row),
+        "protocol_cost": None if row.cost is None else protocol_cost(row),
+    }
+
+
 def trial_read(row: TrialRow) -> TrialRead:
     f1, f2 = _objectives(row)
     return TrialRead(
         id=row.id, generation=row.generation, individual=row.individual, replicate=row.replicate,
         seed=row.seed, params=row.params, state=row.state, status=row.status,
         n_remaining=measured_n(row.status, row.n_remaining), responses=row.responses, engine=row.engine,
-        wall_time_s=row.wall_time_s, cost=row.cost, f1=f1, f2=f2, pareto=row.pareto, worker=row.worker,
-        attempts=row.attempts, message=row.message, updated_at=row.updated_at,
+        wall_time_s=row.wall_time_s, cost=row.cost, **_protocol(row), f1=f1, f2=f2, pareto=row.pareto,
+        worker=row.worker, attempts=row.attempts, message=row.message, updated_at=row.updated_at,
     )
 
 
@@ -81,7 +91,8 @@ def _json(document: dict) -> bytes:
 
 def _trial_item(row) -> dict:
     """A ``TrialRead`` as a dict, from a row of ``TRIAL_READ_COLUMNS``."""
-    item = row._asdict()
+    item = row._asdict() | _protocol(row)
+    del item["full_load_factor"]
     item["n_remaining"] = measured_n(item["status"], item["n_remaining"])
     item["f1"] = _finite_objective(item.pop("f1_value"), item.pop("f1_kind"))
     item["f2"] = _finite_objective(item.pop("f2_value"), item.pop("f2_kind"))
@@ -164,18 +175,31 @@ def _sort_key(value: float | None) -> float:
     return math.inf if value is None else value
 
 
-def generation_summary(store: SqlStore, study_id: str, principal: Principal) -> list[GenerationSummary]:
+def generation_summary_json(
+    store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, held: str | None = None
+) -> Served:
+    """The per-generation summary as JSON, built once per version of the study row like the
+    Pareto front (every trial written changes it): the dashboard reads it after each change of
+    the trials for Fig. 5's W1 annotations, so a poll with nothing new is a 304 (``held``: the
+    client's ``If-None-Match``) and one build serves every dashboard."""
+    study = store.study_version(study_id, principal.visible_to)
+    build = views.builder("generations", _generation_summary, store, study_id)
+    return views.serve("generations", study_id, study.change_number, build, held=held)
+
+
+def _generation_summary(store: SqlStore, views: StudyViewCache, study_id: str) -> bytes:
     """``optimizer/generations.py`` on the stored rows (objectives as stored)."""
-    definition = StudyDefinition.model_validate(store.get_study(study_id, principal.visible_to).definition)
+    definition = StudyDefinition.model_validate(store.get_study(study_id).definition)
     runs = (
         Run(row.generation, row.status if row.state == TrialState.DONE.value else None, row.responses or {},
             row.wall_time_s, row.cost, _objectives(row)[0])
         for row in store.trial_columns(study_id)
     )
-    return [
+    summaries = [
         GenerationSummary.model_validate(entry)
         for entry in per_generation(runs, definition.measured_by_response())
     ]
+    return _json([summary.model_dump(mode="json") for summary in summaries])
 
 
 def recommendation_json(

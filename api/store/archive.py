@@ -30,6 +30,7 @@ from api.errors import ConflictError, InvalidInputError
 from api.models import StudyRow, TrialRow
 from api.store.base import chunks
 from api.store.studies import StudyStore
+from dem.result import SimulationResult
 from optimizer.protocols import StudyStatus, TrialState
 
 ARCHIVE_FORMAT = "demcal-study-archive/2"
@@ -132,6 +133,9 @@ class StudyArchives(StudyStore):
                 trial["scenario"] = _shared_scenario(shared, trial.get("scenario"), trial.get("id"))
             if trial.get("study_id") != study_id:
                 raise InvalidInputError(f"trial {trial.get('id')!r} belongs to another study")
+            if "full_load_factor" not in trial and isinstance(trial.get("result"), dict):
+                # An archive older than the column (migration 0010): the factor its result holds.
+                trial["full_load_factor"] = SimulationResult.model_validate(trial["result"]).full_load_factor
             if trial.get("state") in UNFINISHED:
                 trial.update(state=TrialState.PENDING.value, worker=None, started_at=None)
             trials.append(trial)

@@ -27,9 +27,9 @@ class TrialFilter:
 TRIAL_READ_COLUMNS = (
     TrialRow.id, TrialRow.generation, TrialRow.individual, TrialRow.replicate, TrialRow.seed,
     TrialRow.params, TrialRow.state, TrialRow.status, TrialRow.n_remaining, TrialRow.responses,
-    TrialRow.engine, TrialRow.wall_time_s, TrialRow.cost, TrialRow.pareto, TrialRow.worker,
-    TrialRow.attempts, TrialRow.message,
-    TrialRow.updated_at, TrialRow.f1_value, TrialRow.f1_kind, TrialRow.f2_value, TrialRow.f2_kind,
+    TrialRow.engine, TrialRow.wall_time_s, TrialRow.cost, TrialRow.full_load_factor, TrialRow.pareto,
+    TrialRow.worker, TrialRow.attempts, TrialRow.message, TrialRow.updated_at, TrialRow.f1_value,
+    TrialRow.f1_kind, TrialRow.f2_value, TrialRow.f2_kind,
 )
 
 

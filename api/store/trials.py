@@ -124,6 +124,7 @@ class TrialStore(StoreBase):
         now = utcnow()
         values = result_columns(result) | {
             "state": TrialState.DONE.value, "cost": result.cost, "dt": result.dt,
+            "full_load_factor": result.full_load_factor,
             "message": result.message, "finished_at": now, "updated_at": now,
             "attempts": TrialRow.attempts + outcome.retries,
         }

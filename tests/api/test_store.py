@@ -401,3 +401,36 @@ def test_an_archive_of_format_1_restores_and_a_damaged_scenario_index_is_refused
         store.restore_study(damaged)
     assert store.restore_study(old) == study_id
     assert [r.spec for r in store.trials(study_id)] == [r.spec for r in source.trials(study_id)]
+
+
+def test_an_archive_from_before_the_full_load_factor_column_restores_it_from_each_result(
+    store, tmp_path, sqlite_template
+):
+    """Archives made before migration 0010 (benchmarks/paper-study-seed2023-protocol-cost) have no
+    ``full_load_factor`` column; the trial lists read it, so it comes from each result."""
+    import shutil
+
+    import sqlalchemy as sa
+
+    from api.db import create_db_engine
+    from api.store import SqlStore
+
+    shutil.copy(sqlite_template, tmp_path / "source.db")
+    source = SqlStore(create_db_engine(f"sqlite:///{tmp_path / 'source.db'}"))
+    study_id = source.create_study(_definition(), owner=None)
+    specs = _specs(study_id, 2)
+    source.add_trials(specs)
+    early = _result(0).model_copy(update={"full_load_factor": 3.25})
+    source.record_result(TrialOutcome(specs[0].trial_id, early))
+    archive = source.archive_study(study_id)
+    trials = [{key: value for key, value in t.items() if key != "full_load_factor"}
+              for t in archive["trials"]]
+    older = {**archive, "trials": trials}
+
+    store.restore_study(older)
+
+    with store.session() as s:
+        query = sa.select(TrialRow.id, TrialRow.full_load_factor).where(TrialRow.study_id == study_id)
+        factors = dict(s.execute(query).all())
+    assert archive["trials"][0]["full_load_factor"] == 3.25  # what the archive carries now
+    assert factors == {specs[0].trial_id: 3.25, specs[1].trial_id: 1.0}

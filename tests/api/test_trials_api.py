@@ -256,3 +256,56 @@ def test_csv_has_a_column_per_declared_response_headed_with_its_unit(client, key
     assert all(row["failure"] == "" and all(row[c] for c in columns) for row in measured)
     assert {float(row["heap.height [m]"]) for row in measured} == {0.04}
     assert study["f1_unit"] == "1"  # each experiment's distance over its tolerance
+
+
+def test_a_trial_gives_the_whole_protocols_t_and_cost_that_f2_ranks(client, keys, store):
+    # A run that emptied the tray stopped early: f2 is its T x full_load_factor, the whole
+    # protocol's (optimizer/objectives.py). The trial lists give that beside the run's own, so
+    # that the dashboard draws the points where the search ranked them.
+    from optimizer.memory import synthetic_result
+    from optimizer.objectives import evaluate, protocol_cost, protocol_wall_time
+    from optimizer.protocols import TrialOutcome, TrialSpec, trial_id
+
+    study_id = store.create_study(study_definition(replicates=1), owner="alice")
+    params = {"E": 1e7, "nu": 0.3, "e": 0.5, "mu": 0.5}
+    specs = [TrialSpec(trial_id(study_id, i, 0), study_id, i, 0, 0, i, params, {}) for i in range(2)]
+    store.add_trials(specs)
+    result = synthetic_result(specs[0]).model_copy(update={"full_load_factor": 2.5})
+    store.record_result(TrialOutcome(specs[0].trial_id, result))
+    definition = StudyDefinition.model_validate(store.load_study(study_id).definition)
+    (evaluation,) = evaluate(store.trials(study_id), definition, definition.n_items())
+
+    done, pending = client.get(f"/api/v1/studies/{study_id}/trials", headers=keys.auth()).json()["items"]
+    one = client.get(f"/api/v1/studies/{study_id}/trials/{specs[0].trial_id}", headers=keys.auth()).json()
+
+    assert done["wall_time_s"] == result.wall_time_s and done["cost"] == result.cost  # the run's own
+    assert done["protocol_wall_time_s"] == pytest.approx(protocol_wall_time(result))
+    assert done["protocol_cost"] == pytest.approx(protocol_cost(result))
+    assert done["protocol_cost"] == pytest.approx(2.5 * result.cost)
+    assert done["protocol_cost"] == pytest.approx(evaluation.f2)  # what the search ranked (cost)
+    assert {key: one[key] for key in done} == done
+    assert pending["protocol_wall_time_s"] is None and pending["protocol_cost"] is None
+
+
+def test_the_generation_summary_is_built_once_per_change_and_a_poll_without_one_is_a_304(
+    client, keys, store, finished
+):
+    # The dashboard reads it after every change of the trials, for Fig. 5's W1s.
+    from dataclasses import replace
+
+    from optimizer.protocols import StudyStatus, trial_id
+
+    url = f"/api/v1/studies/{finished}/generations"
+    first = client.get(url, headers=keys.auth())
+    again = client.get(url, headers={**keys.auth(), "If-None-Match": first.headers["etag"]})
+    store.transition(finished, [StudyStatus.DONE], StudyStatus.DONE)  # a change of the study row
+
+    moved = client.get(url, headers={**keys.auth(), "If-None-Match": first.headers["etag"]})
+    template = store.trials(finished)[0].spec
+    store.add_trials([replace(template, trial_id=trial_id(finished, 99, 0), individual=99, generation=3)])
+    added = client.get(url, headers={**keys.auth(), "If-None-Match": moved.headers["etag"]})
+
+    assert first.status_code == 200 and first.headers["cache-control"] == "no-cache"
+    assert again.status_code == 304 and again.content == b""
+    assert moved.status_code == 304  # the same bytes under the new version
+    assert added.status_code == 200 and [g["trials"] for g in added.json()] == [6, 3, 3, 1]

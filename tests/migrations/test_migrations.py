@@ -193,6 +193,48 @@ def test_0009_settles_the_pending_validation_of_studies_that_ended(empty_url):
         engine.dispose()
 
 
+def test_0010_copies_each_results_full_load_factor_into_its_trial(empty_url):
+    # Three trials as the previous revision left them: a run that stopped early (its result holds
+    # a factor), one stored before the factor existed (its result reads 1), one not run yet.
+    upgrade_database(empty_url, "0009")
+    engine = create_db_engine(empty_url)
+    now = "2026-11-24 10:00:00"
+    trial = (
+        "INSERT INTO trials (id, study_id, individual, generation, replicate, seed, params, scenario, "
+        "state, status, wall_time_s, cost, result, message, attempts, pareto, created_at, updated_at) "
+        "VALUES (:id, 's1', :i, 0, 0, 1, '{}', '{}', :state, :status, 2.0, 10.0, :result, '', 0, false, "
+        ":now, :now)"
+    )
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                sa.text(
+                    "INSERT INTO studies (id, name, status, definition, generation, message, extra, "
+                    "created_at, updated_at) VALUES ('s1', 'old', 'done', '{}', 1, '', '{}', :now, :now)"
+                ),
+                {"now": now},
+            )
+            for i, (tid, state, result) in enumerate((
+                ("early", "done", '{"status": "ok", "cost": 10.0, "full_load_factor": 2.5}'),
+                ("older", "done", '{"status": "ok", "cost": 10.0}'),
+                ("pending", "pending", None),
+            )):
+                status = "ok" if result else None
+                connection.execute(
+                    sa.text(trial),
+                    {"id": tid, "i": i, "state": state, "status": status, "result": result, "now": now},
+                )
+        upgrade_database(empty_url)
+        with engine.connect() as connection:
+            factors = dict(connection.execute(sa.text("SELECT id, full_load_factor FROM trials")).all())
+        assert factors == {"early": 2.5, "older": 1.0, "pending": 1.0}
+        downgrade_database(empty_url, "0009")
+        with engine.connect() as connection:
+            assert "full_load_factor" not in {c["name"] for c in sa.inspect(connection).get_columns("trials")}
+    finally:
+        engine.dispose()
+
+
 def _json(value):
     """A JSON column as read back by raw SQL: a dict on PostgreSQL, text on SQLite."""
     import json
