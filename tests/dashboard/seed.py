@@ -5,8 +5,11 @@ The trials are synthetic: parameters drawn per generation from a distribution th
 towards a hidden parameter set, N_t and T from a smooth made-up response (more friction and less
 restitution keep more items; a stiffer contact takes a smaller time step, so a longer run).
 Nothing here pretends to be physics; it only gives the pages data with the shape of a real
-study. The Pareto front is computed here by plain non-dominated filtering, so a test knows how
-many points the page must highlight without trusting the code under test.
+study. As a feeder run does, a seeded run does less work once items have left, and stops when the
+tray empties: its own T and cost are the made-up protocol's over the real ``full_load_factor``
+(``dem/scenarios/feeder.py``), and f2 is the whole protocol's (``optimizer/objectives.py``). The
+Pareto front is computed here by plain non-dominated filtering, so a test knows how many points
+the page must highlight without trusting the code under test.
 
 ``snapshot_run`` writes a replayable snapshot directory with the feeder's own ``SnapshotWriter``
 (the format the replay endpoint reads): items sliding along the real parametric tray, the
@@ -25,14 +28,16 @@ from api.auth import create_key
 from api.db import create_db_engine, upgrade_database
 from api.store import SqlStore
 from dem.result import SimulationResult, SimulationStatus
+from dem.scenarios.feeder import full_load_factor
 from optimizer.driver import Driver, recommend
-from optimizer.objectives import evaluate
+from optimizer.objectives import evaluate, protocol_wall_time
 from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, trial_id
 from optimizer.space import ParameterSpace
 from optimizer.study import VALIDATION_REPLICATE_BASE, StudyDefinition, parse_study
 
 MEASURED = [0, 2, 3, 3, 4, 4, 5, 8, 12, 16]
 N_ITEMS = 30
+INSERTED, PROTOCOL_END = 1.0, 65.0  # the feeder's insertion and protocol end (s)
 TRUTH = {"logE": 6.3, "nu": 0.3, "e": 0.45, "mu": 0.42}
 
 
@@ -154,18 +159,22 @@ def seed_study(
         for spec in specs:
             n_remaining, wall, cost = _response(spec.params, rng)
             times = [float(t) for t in np.sort(rng.uniform(5.5, 60.0, N_ITEMS - n_remaining))]
+            discharges = times + [None] * n_remaining
+            stopped = times[-1] if n_remaining == 0 else PROTOCOL_END  # an empty tray stops the run
+            factor = full_load_factor([INSERTED] * N_ITEMS, discharges, stopped, PROTOCOL_END)
             result = SimulationResult(
                 status=SimulationStatus.OK, n_items=N_ITEMS, n_remaining=n_remaining,
-                discharge_times=times + [None] * n_remaining, sim_time=65.0, wall_time_s=wall,
-                steps=int(cost / 400), dt=65.0 / max(1, int(cost / 400)), cost=cost, params=spec.params,
-                seed=spec.seed,
+                discharge_times=discharges, sim_time=stopped, wall_time_s=wall / factor,
+                steps=int(cost / 400), dt=65.0 / max(1, int(cost / 400)), cost=cost / factor,
+                full_load_factor=factor, params=spec.params, seed=spec.seed,
             )
             if spec.individual in real_results:
                 result = real_results[spec.individual]
-                n_remaining, wall = result.n_remaining, result.wall_time_s
+                n_remaining = result.n_remaining
             failure = _failure(spec) if failing else None
             if failure is not None:
-                result = result.model_copy(update=failure)
+                # A failed run is never scaled (the feeder's full_load_factor is 1 then).
+                result = result.model_copy(update=failure | {"full_load_factor": 1.0})
                 seeded.failed[spec.trial_id] = failure["status"].value
             store.record_result(TrialOutcome(spec.trial_id, result, worker="seed"))
             seeded.trial_ids.append(spec.trial_id)
@@ -173,7 +182,7 @@ def seed_study(
                 objectives[spec.trial_id] = (None, None)  # not a measurement: views show none
                 continue
             f1 = abs(n_remaining - target)
-            objectives[spec.trial_id] = (f1, wall)
+            objectives[spec.trial_id] = (f1, protocol_wall_time(result))  # objective_time "wall"
             seeded.f1[spec.trial_id] = f1
             seeded.n_remaining[spec.trial_id] = n_remaining
         measured = {tid: values for tid, values in objectives.items() if values[0] is not None}

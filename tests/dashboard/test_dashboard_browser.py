@@ -15,6 +15,7 @@ import pytest
 from scipy.stats import wasserstein_distance
 
 from dem.result import SimulationResult, SimulationStatus
+from optimizer.objectives import protocol_cost, protocol_wall_time
 from optimizer.protocols import StudyStatus, TrialOutcome, TrialSpec, TrialState, trial_id
 from optimizer.study import parse_study
 from tests.dashboard.conftest import RETAINED_IN_REPLAY, save_screenshot
@@ -82,6 +83,53 @@ def test_pareto_plot_has_a_point_per_trial_and_highlights_the_front(page, dashbo
     assert front["symbol"] == "diamond"
     assert page.errors == []
     save_screenshot(page, "dashboard-study")
+
+
+def pareto_points(page) -> list[dict]:
+    """The Pareto plot's traces as drawn: name, trial ids, x, y, hover lines of each point."""
+    return page.evaluate(
+        """() => document.getElementById('pareto-plot').data.map((t) => ({
+             name: t.name, ids: t.customdata.map((c) => c[0]), x: Array.from(t.x), y: Array.from(t.y),
+             times: t.customdata.map((c) => c[9])}))"""
+    )
+
+
+def test_pareto_points_sit_at_the_whole_protocols_f2_so_the_staircase_bounds_them(page, dashboard):
+    # f2 is the T (this study) or cost of the whole protocol: the run's own x full_load_factor
+    # (optimizer/objectives.py). The seeded runs did less work once items left, as feeder runs
+    # do, so their own T is up to 2.4 times below it; drawn there, the front ranked on f2 cut
+    # through the points.
+    open_study(page, dashboard)
+    study_id = dashboard.study.study_id
+    results = {record.spec.trial_id: record.result for record in dashboard.store.trials(study_id)}
+    ranked_f2 = {tid: dashboard.store.get_trial(study_id, tid).f2_value for tid in dashboard.study.pareto_ids}
+
+    measured, front = pareto_points(page)
+    assert sum(results[tid].full_load_factor > 1.5 for tid in measured["ids"]) >= 10  # the case at all
+    assert measured["x"] == pytest.approx([protocol_wall_time(results[tid]) for tid in measured["ids"]])
+    assert front["x"] == pytest.approx([ranked_f2[tid] for tid in front["ids"]])  # what was ranked
+    # Each measured point is on or above the staircase: some member is as fast and as close.
+    members = list(zip(front["x"], front["y"], strict=True))
+    for x, y in zip(measured["x"], measured["y"], strict=True):
+        assert any(fx <= x * (1 + 1e-9) and fy <= y for fx, fy in members), (x, y)
+    # The hover gives the run's own T and the protocol's.
+    tid, times = measured["ids"][0], measured["times"][0]
+    own, whole = results[tid].wall_time_s, protocol_wall_time(results[tid])
+    assert f"this run: T = {js_fmt(own)} s" in times and f"whole protocol: T = {js_fmt(whole)} s" in times
+    title = page.evaluate("() => document.getElementById('pareto-plot').layout.xaxis.title.text")
+    assert title == "computation time T of the whole protocol (s)"
+
+    page.select_option("#pareto-x", "cost")
+    page.wait_for_function(
+        "() => document.getElementById('pareto-plot').layout.xaxis.title.text.startsWith('cost')"
+    )
+    measured_cost, _ = pareto_points(page)
+    assert measured_cost["ids"] == measured["ids"]
+    assert measured_cost["x"] == pytest.approx([protocol_cost(results[tid]) for tid in measured["ids"]])
+    assert page.evaluate("() => document.getElementById('pareto-plot').layout.xaxis.title.text") == (
+        "cost of the whole protocol (sphere-steps + contact-steps)"
+    )
+    assert page.errors == []
 
 
 def running_study(dashboard, name: str, trials: int = 6) -> str:
@@ -305,8 +353,14 @@ def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dash
 
     traces = page.evaluate(
         "() => document.getElementById('generation-plot').data.map((t) => "
-        "({name: t.name, x: t.x, y: t.y, w1: t.customdata ?? null}))"
+        "({name: t.name, x: t.x, y: t.y, w1: t.name.startsWith('median') ? t.customdata ?? null : null, "
+        "axis: t.yaxis || 'y', ids: t.name === 'trials' ? t.customdata.map((c) => c[0]) : null}))"
     )
+    study_id = dashboard.study.study_id
+    api = page.request.get(
+        dashboard.url(f"/api/v1/studies/{study_id}/generations"),
+        headers={"Authorization": f"Bearer {dashboard.study.api_key}"},
+    ).json()
 
     target = next(t for t in traces if t["name"].startswith("experimental target"))
     medians = [t for t in traces if t["name"] == "median per generation"]
@@ -318,16 +372,25 @@ def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dash
     assert [len(m["x"]) for m in medians] == [5, 5]  # generations 0..4, for N_t and for T
     assert sorted(measured) == medians[0]["x"] == list(range(5))
     assert medians[0]["y"] == [statistics.median(measured[g]) for g in range(5)]
-    # Each generation's W1 to the experiment, in the hover and along the panel's top (as scipy's).
-    definition = parse_study(dashboard.store.load_study(dashboard.study.study_id).definition)
+    # Each generation's W1 to the experiment, in the hover and along the panel's top: the API's
+    # (GET /generations), which is scipy's.
+    w1 = [entry["w1_to_experiment"]["n_remaining"] for entry in api]
+    definition = parse_study(dashboard.store.load_study(study_id).definition)
     experiment = definition.experiment.measured
-    w1 = [wasserstein_distance(measured[g], experiment) for g in range(5)]
-    assert medians[0]["w1"] == pytest.approx(w1)
+    assert w1 == pytest.approx([wasserstein_distance(measured[g], experiment) for g in range(5)])
+    assert medians[0]["w1"] == w1
     assert medians[1]["w1"] is None  # T has no experiment
     labels = page.evaluate(
         "() => document.getElementById('generation-plot').layout.annotations.map((a) => a.text)"
     )
     assert [f"{d:.1f}" for d in w1] == labels[labels.index("W1") + 1:labels.index("W1") + 6]
+    # (b) is what f2 ranks: T of the whole protocol (the study's objective_time is "wall").
+    results = {record.spec.trial_id: record.result for record in dashboard.store.trials(study_id)}
+    t_points = next(t for t in traces if t["name"] == "trials" and t["axis"] == "y2")
+    assert t_points["y"] == pytest.approx([protocol_wall_time(results[tid]) for tid in t_points["ids"]])
+    assert any(results[tid].full_load_factor > 1.5 for tid in t_points["ids"])
+    title = page.evaluate("() => document.getElementById('generation-plot').layout.yaxis2.title.text")
+    assert title == "(b) computation time T of the whole protocol (s)"
 
 
 def test_clicking_a_pareto_point_opens_its_trial(page, dashboard):
@@ -546,7 +609,8 @@ def test_failed_runs_are_drawn_apart_and_counted_by_status(page, dashboard):
 
     pareto = page.evaluate(
         """() => document.getElementById('pareto-plot').data.map((t) => ({
-             name: t.name, ids: t.customdata.map((c) => c[0]), y: t.y, yaxis: t.yaxis || 'y'}))"""
+             name: t.name, ids: t.customdata.map((c) => c[0]), x: Array.from(t.x), y: t.y,
+             yaxis: t.yaxis || 'y'}))"""
     )
     fig5 = page.evaluate(
         """() => document.getElementById('generation-plot').data.map((t) => ({
@@ -564,9 +628,14 @@ def test_failed_runs_are_drawn_apart_and_counted_by_status(page, dashboard):
     assert not set(measured["ids"]) & set(failed) and not set(front["ids"]) & set(failed)
     assert sorted(measured["ids"]) == sorted(tid for tid in seeded.trial_ids if tid not in failed)
     by_status = {strip["name"].split()[0]: strip for strip in strips}
+    results = {record.spec.trial_id: record.result for record in dashboard.store.trials(seeded.study_id)}
     for status in counts:
         assert sorted(by_status[status]["ids"]) == sorted(t for t, s in failed.items() if s == status)
         assert set(by_status[status]["y"]) == {status} and by_status[status]["yaxis"] == "y2"
+        # At the protocol value, as the points: for a failed run (never scaled) its own T.
+        strip = by_status[status]
+        assert strip["x"] == pytest.approx([protocol_wall_time(results[t]) for t in strip["ids"]])
+        assert strip["x"] == pytest.approx([results[t].wall_time_s for t in strip["ids"]])
     n_t_points = next(trace for trace in fig5 if trace["name"] == "trials")
     assert not set(n_t_points["ids"]) & set(failed)
     assert all(sorted(ids) == sorted(failed) for ids in crosses) and crosses  # one per parameter panel

@@ -44,21 +44,6 @@ function median(values) {
   return v.length % 2 ? v[mid] : (v[mid - 1] + v[mid]) / 2;
 }
 
-// Wasserstein-1 distance between two samples: the area between their distribution functions.
-export function wasserstein1(a, b) {
-  const u = a.filter(Number.isFinite).sort((x, y) => x - y);
-  const v = b.filter(Number.isFinite).sort((x, y) => x - y);
-  if (!u.length || !v.length) return null;
-  const all = [...u, ...v].sort((x, y) => x - y);
-  let i = 0, j = 0, area = 0;
-  for (let k = 0; k < all.length - 1; k++) {
-    while (i < u.length && u[i] <= all[k]) i++;
-    while (j < v.length && v[j] <= all[k]) j++;
-    area += Math.abs(i / u.length - j / v.length) * (all[k + 1] - all[k]);
-  }
-  return area;
-}
-
 function byGeneration(trials, value) {
   const groups = new Map();
   for (const t of trials) {
@@ -73,10 +58,21 @@ function byGeneration(trials, value) {
 
 // customdata[5] holds the trial's responses as text ("N<sub>t</sub> = 3 items"), one line each.
 // customdata[8] the item-wall parameters the trial carries, one line each ("" without them).
+// customdata[9] the run's own T and cost and the whole protocol's (timesHtml).
 const HOVER =
   "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br>" +
   "E = %{customdata[1]:.3s}Pa<br>ν = %{customdata[2]:.3f}<br>e = %{customdata[3]:.3f}<br>" +
-  "μ = %{customdata[4]:.3f}<br>%{customdata[8]}%{customdata[5]}<extra></extra>";
+  "μ = %{customdata[4]:.3f}<br>%{customdata[8]}%{customdata[5]}%{customdata[9]}<extra></extra>";
+
+// The run's own T and cost, and the whole protocol's as the API prices it (TrialRead
+// protocol_wall_time_s / protocol_cost, by the functions f2 is made of): they differ for a run
+// that emptied the tray and stopped early. Each line starts with a break ("" before a result).
+function timesHtml(t) {
+  if (!Number.isFinite(t.wall_time_s)) return "";
+  const run = `<br>this run: T = ${fmt(t.wall_time_s)} s, cost ${fmt(t.cost)}`;
+  if (isFailed(t)) return `${run} (until it failed)`;
+  return `${run}<br>whole protocol: T = ${fmt(t.protocol_wall_time_s)} s, cost ${fmt(t.protocol_cost)}`;
+}
 
 function wallLines(t, before = false) {
   return parametersIn(t.params).filter((p) => p.wall).map((p) => {
@@ -89,7 +85,7 @@ function customdata(trials, responses) {
   return trials.map((t) => [
     t.id, t.params.E, t.params.nu, t.params.e, t.params.mu,
     responses.map((r) => `${responseHtml(r)} = ${withUnit(measuredValue(t, r), r, 4)}`).join("<br>"),
-    t.generation, null, wallLines(t),
+    t.generation, null, wallLines(t), timesHtml(t),
   ]);
 }
 
@@ -124,9 +120,23 @@ function fromZero(trials, value) {
   return [-0.06 * top, 1.06 * top];
 }
 
+// f2 is the cost or T of the whole protocol (optimizer/objectives.py): a run did less work once
+// items left and stopped when the tray emptied, up to 6.4 times short of the protocol in
+// benchmarks/paper-study-seed2023-protocol-cost (full_load_factor), and the API
+// scales it by the function f2 is made of (TrialRead protocol_cost / protocol_wall_time_s; no
+// second formula here). The points sit there, so the front's staircase runs through the f2 it
+// was ranked on: with one replicate each point's x is its set's f2 on the study's own axis; with
+// several the search ranked their mean, around which the set's runs sit. On the other axis the
+// front is still the one ranked on the study's own, so points may sit below its staircase.
 const X_AXES = {
-  wall_time_s: { title: "computation time T (s)", value: (t) => t.wall_time_s },
-  cost: { title: "cost (sphere-steps + contact-steps)", value: (t) => t.cost },
+  wall_time_s: { title: "computation time T of the whole protocol (s)", value: (t) => t.protocol_wall_time_s },
+  cost: { title: "cost of the whole protocol (sphere-steps + contact-steps)", value: (t) => t.protocol_cost },
+};
+
+// Fig. 5's T panel shows what f2 ranks: the study's objective_time, of the whole protocol.
+const F2_PANEL = {
+  wall: { title: "computation time T of the whole protocol (s)", value: (t) => t.protocol_wall_time_s },
+  cost: { title: "cost of the whole protocol", value: (t) => t.protocol_cost },
 };
 
 // Runs that measured nothing (optimizer/outcomes.py): every status but "ok". Marker and colour
@@ -170,12 +180,13 @@ export function failureCounts(trials) {
 const FAILED_HOVER =
   "<b>%{customdata[0]}</b><br>generation %{customdata[6]}<br><b>%{customdata[7]}</b>: %{customdata[5]}, " +
   "not ranked<br>E = %{customdata[1]:.3s}Pa<br>ν = %{customdata[2]:.3f}<br>e = %{customdata[3]:.3f}<br>" +
-  "μ = %{customdata[4]:.3f}%{customdata[8]}<extra></extra>";
+  "μ = %{customdata[4]:.3f}%{customdata[8]}%{customdata[9]}<extra></extra>";
 
 function failedCustomdata(trials, failures, responses) {
   return trials.map((t) => [
     t.id, t.params.E, t.params.nu, t.params.e, t.params.mu, noneHtml(responses), t.generation,
     t.status === "ok" ? `${failures.get(t.individual)} (another replicate)` : t.status, wallLines(t, true),
+    timesHtml(t),
   ]);
 }
 
@@ -212,6 +223,12 @@ export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit, f1r
       cmin: 0, cmax, line: { width: 2, color: INK },
     },
   };
+  // The failed runs are drawn at the same x as the points, the protocol value: it is what
+  // objectives.py put into their set's f2 before the penalty, and what pareto.png draws them at
+  // (Evaluation.cost / wall_time_s). A failed run is never scaled (its full_load_factor is 1,
+  // dem/scenarios/feeder.py), so that is its own T up to the failure: what it cost, not a
+  // protocol it never ran; the hover says so. A replicate that ended ok of a failed set keeps
+  // its scaled value.
   const failed = trials.filter((t) => failedOf(t) && Number.isFinite(x.value(t)));
   const counts = failureCounts(trials);
   const rows = counts.byStatus.map(([status]) => status);
@@ -261,7 +278,19 @@ export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit, f1r
 // generation stacked by status: a failed run measured nothing and its T is where it stopped,
 // so no panel draws it. Axes: x/y the first response, x2/y2 T, x3/y3 the failed runs, x4/y4
 // onwards the other responses.
-export function generationFigure(trials, responses, maxGeneration) {
+//
+// The T panel shows what f2 ranks (F2_PANEL): the study's objective_time ("cost" or "wall") of
+// the whole protocol, not the run's own. The paper's T was the time of the full 65 s protocol,
+// and a run's own is up to 6.4 times less (X_AXES): per run, a generation that
+// found emptying sets looked faster for its outcome, not its parameters, which is what f2 was
+// made to stop rewarding, and the panel would disagree with the Pareto plot beside it. The
+// hover gives the run's own T too.
+//
+// Each generation's W1 to the experiment (above a response's panel, and in its medians' hover)
+// is the API's (GET /studies/{id}/generations, optimizer/generations.py), ``summaries`` its
+// entries; none are drawn before they are read.
+export function generationFigure(trials, responses, maxGeneration, summaries = [], objectiveTime = "cost") {
+  const f2 = F2_PANEL[objectiveTime] || F2_PANEL.cost;
   const done = trials.filter((t) => t.state === "done" && !isFailed(t));
   const type = done.length > WEBGL_ABOVE ? "scattergl" : "scatter";
   const gens = done.map((t) => t.generation + jitter(t));
@@ -274,12 +303,21 @@ export function generationFigure(trials, responses, maxGeneration) {
   });
   // A response's medians carry each generation's W1 to the experiment's values: a median of noisy
   // single runs can sit on the target by chance, the distance says how like the experiment the
-  // generation's runs are (the same figure as GET /generations and summary.json).
+  // generation's runs are (GET /generations computes it, as summary.json's).
+  const searched = summaries.filter((entry) => entry.generation <= maxGeneration);
+  const w1Of = (name) => {
+    const shown = searched.filter((entry) => entry.w1_to_experiment && name in entry.w1_to_experiment);
+    return new Map(shown.map((entry) => [entry.generation, entry.w1_to_experiment[name]]));
+  };
   const distances = [];
-  const medianTrace = (value, axisSuffix, measured) => {
+  for (const [i, r] of responses.entries()) {
+    const byGen = w1Of(r.name);
+    if (byGen.size) distances.push({ axisSuffix: i === 0 ? "" : String(i + 3), byGen });
+  }
+  const medianTrace = (value, axisSuffix, name) => {
     const m = byGeneration(done, value);
-    const w1 = measured?.length ? m.x.map((g) => wasserstein1(m.groups.get(g), measured)) : null;
-    if (w1) distances.push({ axisSuffix, x: m.x, w1 });
+    const byGen = name === undefined ? null : w1Of(name);
+    const w1 = byGen?.size ? m.x.map((g) => byGen.get(g) ?? null) : null;
     return {
       type: "scatter", mode: "lines+markers", name: "median per generation", showlegend: axisSuffix === "",
       x: m.x, y: m.y, xaxis: "x" + axisSuffix, yaxis: "y" + axisSuffix,
@@ -293,8 +331,8 @@ export function generationFigure(trials, responses, maxGeneration) {
   const data = [];
   responses.forEach((r, i) => {
     const value = (t) => measuredValue(t, r);
-    data.push(points(done.map(value), suffixOf(i)), medianTrace(value, suffixOf(i), r.experiment?.measured));
-    if (i === 0) data.push(points(done.map((t) => t.wall_time_s), "2"), medianTrace((t) => t.wall_time_s, "2"));
+    data.push(points(done.map(value), suffixOf(i)), medianTrace(value, suffixOf(i), r.name));
+    if (i === 0) data.push(points(done.map(f2.value), "2"), medianTrace(f2.value, "2"));
   });
   const none = noneHtml(responses);
   const counts = failureCounts(trials);
@@ -327,8 +365,8 @@ export function generationFigure(trials, responses, maxGeneration) {
   const letter = (i) => String.fromCharCode(97 + i);
   const layout = baseLayout({
     xaxis2: genAxis("generation", [0.54, 1]),
-    yaxis2: axis(`(${letter(responses.length)}) computation time T (s)`, {
-      domain: [0, 1], range: fromZero(done, (t) => t.wall_time_s),
+    yaxis2: axis(`(${letter(responses.length)}) ${f2.title}`, {
+      domain: [0, 1], range: fromZero(done, f2.value),
     }),
     xaxis3: genAxis("", [0, 0.46]),
     yaxis3: axis("failed runs", { domain: [0.8, STRIP_TOP], rangemode: "tozero", nticks: 3, title: { text: "failed<br>runs", font: { size: 11 } } }),
@@ -360,12 +398,14 @@ export function generationFigure(trials, responses, maxGeneration) {
       layout["yaxis" + suffixOf(i)].anchor = "x" + suffixOf(i);
     }
   });
-  for (const { axisSuffix, x, w1 } of distances) {
+  for (const { axisSuffix, byGen } of distances) {
     const at = (g, text) => ({
       xref: "x" + axisSuffix, yref: `y${axisSuffix} domain`, x: g, y: 1, yanchor: "bottom",
       showarrow: false, text, font: { size: 10, color: INK },
     });
-    layout.annotations.push(at(x[0] - 0.55, "W1"), ...x.map((g, k) => at(g, w1[k] === null ? "" : w1[k].toFixed(1))));
+    const x = [...byGen.keys()].sort((a, b) => a - b);
+    layout.annotations.push(at(x[0] - 0.55, "W1"),
+      ...x.map((g) => at(g, Number.isFinite(byGen.get(g)) ? byGen.get(g).toFixed(1) : "")));
   }
   layout.xaxis3.showticklabels = false;
   layout.xaxis3.anchor = "y3";

@@ -28,6 +28,7 @@ const POLL_MS = 3000;
 const TERMINAL = new Set(["done", "cancelled", "failed"]);
 
 const trials = new Map();
+let generations = []; // GET /generations: each generation's W1 to the experiment, for Fig. 5
 let study = null;
 let responses = []; // the experiments' responses with units (api.js experimentResponses)
 let cursor = null; // the study's change number at the last page: the next poll asks for later ones
@@ -76,7 +77,8 @@ function renderHeader() {
       [`Target ${responseText(r)}`, `${withUnit(r.target, r)} (tolerance ±${fmt(r.experiment.tolerance ?? NaN)})`],
       [`Measured ${responseText(r)}`, (r.experiment.measured || []).join(", ")],
     ]),
-    ["Objective f2", def.objective_time === "wall" ? "wall time T (s)" : "cost (machine-independent)"],
+    ["Objective f2", def.objective_time === "wall" ? "wall time T of the whole protocol (s)"
+      : "cost of the whole protocol (machine-independent)"],
     ["Created", fmtTime(study.created_at)],
     ["Updated", fmtTime(study.updated_at)],
   ];
@@ -103,8 +105,11 @@ function maxGeneration() {
 }
 
 // The Pareto front first (it is what the page is for); the two figures below the fold are
-// drawn in the next frame so that the front shows up without waiting for them.
-async function renderPlots() {
+// drawn in the next frame so that the front shows up without waiting for them. With
+// ``readGenerations`` (the trials changed), the per-generation summary is read meanwhile, once
+// per change (a cached view: its ETag makes it a 304 when nothing changed), for Fig. 5's W1.
+async function renderPlots(readGenerations = false) {
+  const summaries = readGenerations ? api(`${base}/generations`) : null;
   await plotlyReady();
   const list = [...trials.values()];
   const xKey = document.getElementById("pareto-x").value;
@@ -137,7 +142,11 @@ async function renderPlots() {
   // One panel per experiment's response, each as tall as the feeder's single one.
   document.getElementById("generation-plot").style.height = responses.length > 1
     ? `${520 + 300 * (responses.length - 1)}px` : "";
-  const gen = generationFigure(searched, responses, gmax);
+  // If the summary could not be read, the plots are drawn with the last W1s read, and the
+  // error is the poll's (its banner) once they are.
+  let unread = null;
+  if (summaries) generations = await summaries.catch((error) => { unread = error; return generations; });
+  const gen = generationFigure(searched, responses, gmax, generations, study.definition?.objective_time);
   Plotly.react("generation-plot", gen.data, gen.layout, CONFIG);
   const par = parameterFigure(searched, study.definition?.parameters || {}, gmax, responses, study.f1_unit);
   Plotly.react("parameter-plot", par.data, par.layout, CONFIG);
@@ -145,6 +154,7 @@ async function renderPlots() {
   bindClicks();
   // For benchmarks/dashboard_render.py: the first moment every plot of the study is drawn.
   if (!performance.getEntriesByName("demcal:plots-drawn").length) performance.mark("demcal:plots-drawn");
+  if (unread) throw unread;
 }
 
 // The study's parameters (the items' four and the wall ones it names), as table cells; the tables'
@@ -231,7 +241,8 @@ function renderRecommendation(body) {
       rows.push([`f1 (${unitOf({ unit: study.f1_unit })})`, `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
     }
     if (rec.replicates) rows.push(["replicates in the search", String(rec.replicates)]);
-    for (const [key, label] of [["wall_time_s", "T (s)"], ["cost", "cost"]]) {
+    // optimizer.pareto.summary: the set's f2 parts, of the whole protocol (mean over replicates).
+    for (const [key, label] of [["wall_time_s", "T of the whole protocol (s)"], ["cost", "cost of the whole protocol"]]) {
       if (rec[key] !== undefined && rec[key] !== null) rows.push([label, fmt(rec[key], 4)]);
     }
     const trialId = (rec.trial_ids || [])[0]; // optimizer.pareto.summary: every replicate of the set
@@ -376,7 +387,7 @@ async function refresh() {
     renderHeader();
     changed = await loadTrialChanges();
   }
-  if (changed) await renderPlots();
+  if (changed) await renderPlots(true);
   clearBanner();
   const reading = viewsBeingRead ? [] : readViews();
   // The recommendation's tables count each set's runs in the trials loaded: redrawn when they change.
