@@ -383,7 +383,14 @@ def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dash
     labels = page.evaluate(
         "() => document.getElementById('generation-plot').layout.annotations.map((a) => a.text)"
     )
-    assert [f"{d:.1f}" for d in w1] == labels[labels.index("W1") + 1:labels.index("W1") + 6]
+    bands = [entry["as_experiment"]["n_remaining"] for entry in api]
+    bold = [f"<b>{d:.1f}</b>" if d <= band["w1_95"] else f"{d:.1f}" for d, band in zip(w1, bands, strict=True)]
+    assert bold == labels[labels.index("W1") + 1:labels.index("W1") + 6]
+    # Behind each generation, the median's 5-95 % range of as many runs drawn from the experiment.
+    shapes = page.evaluate("() => document.getElementById('generation-plot').layout.shapes")
+    assert [(s["x0"] + s["x1"]) / 2 for s in shapes] == pytest.approx(range(5))
+    assert [(s["y0"], s["y1"]) for s in shapes] == [(b["median_5"], b["median_95"]) for b in bands]
+    assert {(s["xref"], s["yref"]) for s in shapes} == {("x", "y")}
     # (b) is what f2 ranks: T of the whole protocol (the study's objective_time is "wall").
     results = {record.spec.trial_id: record.result for record in dashboard.store.trials(study_id)}
     t_points = next(t for t in traces if t["name"] == "trials" and t["axis"] == "y2")

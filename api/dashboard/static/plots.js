@@ -309,10 +309,16 @@ export function generationFigure(trials, responses, maxGeneration, summaries = [
     const shown = searched.filter((entry) => entry.w1_to_experiment && name in entry.w1_to_experiment);
     return new Map(shown.map((entry) => [entry.generation, entry.w1_to_experiment[name]]));
   };
+  // Where a generation of as many runs drawn from the experiment itself lands (the API's
+  // as_experiment): its median's 5-95 % range, shaded behind each generation, and W1's 95th
+  // percentile, below which the W1 label is bold: the generation behaves as the experiment does.
+  const bandOf = (name) => new Map(
+    searched.filter((entry) => entry.as_experiment?.[name]).map((entry) => [entry.generation, entry.as_experiment[name]]),
+  );
   const distances = [];
   for (const [i, r] of responses.entries()) {
     const byGen = w1Of(r.name);
-    if (byGen.size) distances.push({ axisSuffix: i === 0 ? "" : String(i + 3), byGen });
+    if (byGen.size) distances.push({ axisSuffix: i === 0 ? "" : String(i + 3), byGen, bands: bandOf(r.name) });
   }
   const medianTrace = (value, axisSuffix, name) => {
     const m = byGeneration(done, value);
@@ -334,6 +340,14 @@ export function generationFigure(trials, responses, maxGeneration, summaries = [
     data.push(points(done.map(value), suffixOf(i)), medianTrace(value, suffixOf(i), r.name));
     if (i === 0) data.push(points(done.map(f2.value), "2"), medianTrace(f2.value, "2"));
   });
+  if (distances.some((d) => d.bands.size)) {
+    // The shaded bands are layout shapes, which have no legend entry: this empty trace is it.
+    data.push({
+      type: "scatter", mode: "markers", name: "median of as many runs drawn from the experiment, 5-95 %",
+      x: [null], y: [null], hoverinfo: "skip",
+      marker: { symbol: "square", size: 12, color: TARGET, opacity: 0.25 },
+    });
+  }
   const none = noneHtml(responses);
   const counts = failureCounts(trials);
   for (const [status] of counts.byStatus) {
@@ -398,14 +412,25 @@ export function generationFigure(trials, responses, maxGeneration, summaries = [
       layout["yaxis" + suffixOf(i)].anchor = "x" + suffixOf(i);
     }
   });
-  for (const { axisSuffix, byGen } of distances) {
+  layout.shapes = [];
+  for (const { axisSuffix, byGen, bands } of distances) {
     const at = (g, text) => ({
       xref: "x" + axisSuffix, yref: `y${axisSuffix} domain`, x: g, y: 1, yanchor: "bottom",
       showarrow: false, text, font: { size: 10, color: INK },
     });
+    const label = (g) => {
+      const w1 = byGen.get(g);
+      if (!Number.isFinite(w1)) return "";
+      return bands.has(g) && w1 <= bands.get(g).w1_95 ? `<b>${w1.toFixed(1)}</b>` : w1.toFixed(1);
+    };
     const x = [...byGen.keys()].sort((a, b) => a - b);
-    layout.annotations.push(at(x[0] - 0.55, "W1"),
-      ...x.map((g) => at(g, Number.isFinite(byGen.get(g)) ? byGen.get(g).toFixed(1) : "")));
+    layout.annotations.push(at(x[0] - 0.55, "W1"), ...x.map((g) => at(g, label(g))));
+    for (const [g, band] of bands) {
+      layout.shapes.push({
+        type: "rect", layer: "below", xref: "x" + axisSuffix, yref: "y" + axisSuffix, line: { width: 0 },
+        x0: g - 0.4, x1: g + 0.4, y0: band.median_5, y1: band.median_95, fillcolor: TARGET, opacity: 0.12,
+      });
+    }
   }
   layout.xaxis3.showticklabels = false;
   layout.xaxis3.anchor = "y3";
