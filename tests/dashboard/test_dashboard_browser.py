@@ -669,6 +669,25 @@ def test_the_recommendation_and_progress_are_drawn_while_identifiability_is_stil
     assert page.errors == []
 
 
+def test_the_equally_good_sets_show_f2_as_ranked_of_the_whole_protocol(page, dashboard):
+    """The sets are sorted on f2, so their last column is f2, not one run's own T."""
+    open_study(page, dashboard)
+    page.wait_for_selector("#equivalent tbody tr td.num")
+    listed = [row.split("\t") for row in page.locator("#equivalent tbody tr").all_inner_texts()]
+    header = page.locator("#equivalent thead th").all_inner_texts()[-1]
+    equivalent = page.request.get(
+        dashboard.url(f"/api/v1/studies/{dashboard.study.study_id}/recommendation"),
+        headers={"Authorization": f"Bearer {dashboard.study.api_key}"},
+    ).json()["equivalent"]
+    by_individual = {point["individual"]: point for point in equivalent}
+
+    shown = [by_individual[int(cells[0].split(" · i")[1])] for cells in listed]
+    assert [cells[-1] for cells in listed] == [js_fmt(point["f2"]) for point in shown]
+    # Runs that stopped early: their own T is below f2.
+    assert any(js_fmt(point["f2"]) != js_fmt(point["wall_time_s"]) for point in shown)
+    assert header == "T of the whole protocol (s)"  # the seeded study's objective_time is "wall"
+
+
 def test_the_validation_table_shows_what_the_driver_stored_after_validating(page, dashboard):
     study_id = seed_validated_study(dashboard.store)
     stored = dashboard.store.get_study(study_id).recommendation

@@ -260,6 +260,9 @@ function renderRecommendation(body) {
   }
   renderValidation(rec?.validation || [], responses[0]?.experiment?.measured || []);
   headerHtml(document.getElementById("equivalent-response"), " per search run");
+  // The sets are sorted on f2, so the column shows f2 as ranked: T or cost of the whole protocol.
+  document.getElementById("equivalent-f2").textContent =
+    study?.definition?.objective_time === "wall" ? "T of the whole protocol (s)" : "cost of the whole protocol";
   const tbody = document.querySelector("#equivalent tbody");
   const rows = (body.equivalent || []).map((t) => {
     const { runs, text, measured } = runsOf(t.individual);
@@ -268,7 +271,7 @@ function renderRecommendation(body) {
       ...paramCells(t.params),
       el("td", { class: "num", text: measured ? text : "–" }),
       el("td", { class: "num", text: String(runs) }),
-      el("td", { class: "num", text: fmt(t.wall_time_s) }));
+      el("td", { class: "num", text: fmt(t.f2) }));
   });
   tbody.replaceChildren(...(rows.length ? rows
     : [el("tr", {}, el("td", { colspan: 4 + parametersOf(study?.definition).length, class: "muted", text: "None yet." }))]));
