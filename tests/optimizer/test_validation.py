@@ -61,15 +61,28 @@ def test_the_truth_itself_is_validated_at_least_nine_times_in_ten():
     assert verdicts.count(VALIDATED) / len(verdicts) >= 0.85
 
 
-def test_an_aggregate_study_validates_by_its_median():
-    """With distance = 'aggregate' the test statistic is |median - target|: the same spread
-    shifted by four items is not reproduced, the experiment's own values are."""
+def test_an_aggregate_study_validates_by_w1_too():
+    """With distance = 'aggregate' the verdict's statistic is still W1: the same spread shifted by
+    four items is not reproduced, the experiment's own values are."""
     definition = make_definition(replicates=1, experiment={"measured": QUICK_MEASURED})
 
     shifted = check(candidate(), fresh_runs([v + 4 for v in QUICK_MEASURED]), definition)
     same = check(candidate(), fresh_runs(QUICK_MEASURED), definition)
 
     assert (shifted["verdict"], same["verdict"]) == (NOT_REPRODUCED, VALIDATED)
+    assert shifted["reproduction"][0]["statistic"] == "W1"
+
+
+def test_the_paper_study_set_with_fresh_median_12_is_not_reproduced_and_the_recommendation_is():
+    """The paper's study (benchmarks/README calibration 17), distance 'aggregate': the median test
+    validated #156 (fresh median 12, |12 - 4| = 8 against a limit of 8.5); W1 (7.70) does not."""
+    paper = {"measured": [0, 0, 1, 2, 3, 4, 4, 12, 15, 16]}
+    definition = make_definition(replicates=1, experiment=paper)
+
+    far = check(candidate(), fresh_runs([22, 12, 11, 29, 0, 12, 13, 10, 13, 12]), definition)
+    near = check(candidate(), fresh_runs([10, 18, 1, 2, 0, 12, 10, 21, 0, 11]), definition)
+
+    assert (far["verdict"], near["verdict"]) == (NOT_REPRODUCED, VALIDATED)
 
 
 # The full feeder at 24 spheres per item (benchmarks/full-feeder-truth-res24.json and
