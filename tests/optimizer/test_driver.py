@@ -11,6 +11,7 @@ from dem.result import SimulationResult, SimulationStatus
 from optimizer.driver import Driver
 from optimizer.memory import MemoryStore, SyntheticExecutor, synthetic_result
 from optimizer.protocols import StudyStatus, TrialState
+from optimizer.seeds import trial_seed
 from tests.optimizer.conftest import make_definition
 
 
@@ -187,9 +188,32 @@ def test_the_recommendation_is_pending_until_its_validation(seeds, during, after
     assert progress.recommendation["validation_status"] in after
 
 
-def test_common_random_numbers_replicate_r_has_one_seed_across_individuals():
+def test_common_random_numbers_replicate_r_has_one_seed_across_the_individuals_of_a_generation():
+    """Each generation draws new common seeds; generation 0 keeps the study-wide seeds, so a study
+    stored before ``common_seeds`` re-runs its initial population on the same draws."""
     definition = make_definition(
         ga={"population": 6, "offspring": 3, "generations": 2}, replicates=3, validation={"seeds": 0}
+    )
+    store = MemoryStore()
+    study_id = start(store, definition)
+
+    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+
+    seeds: dict[tuple[int, int], set[int]] = {}
+    for record in store.trials(study_id):
+        seeds.setdefault((record.spec.generation, record.spec.replicate), set()).add(record.spec.seed)
+    assert sorted(seeds) == [(g, r) for g in range(3) for r in range(3)]
+    assert all(len(values) == 1 for values in seeds.values())
+    assert len({next(iter(values)) for values in seeds.values()}) == 9
+    assert [seeds[0, r] for r in range(3)] == [{trial_seed(definition.seed, r)} for r in range(3)]
+
+
+def test_common_seeds_study_keeps_one_seed_per_replicate_for_the_whole_study():
+    definition = make_definition(
+        ga={"population": 6, "offspring": 3, "generations": 2},
+        replicates=3,
+        validation={"seeds": 0},
+        common_seeds="study",
     )
     store = MemoryStore()
     study_id = start(store, definition)
@@ -199,9 +223,7 @@ def test_common_random_numbers_replicate_r_has_one_seed_across_individuals():
     seeds: dict[int, set[int]] = {}
     for record in store.trials(study_id):
         seeds.setdefault(record.spec.replicate, set()).add(record.spec.seed)
-    assert sorted(seeds) == [0, 1, 2]
-    assert all(len(values) == 1 for values in seeds.values())
-    assert len({next(iter(values)) for values in seeds.values()}) == 3
+    assert seeds == {r: {trial_seed(definition.seed, r)} for r in range(3)}
 
 
 def test_extra_replicates_go_to_promising_sets_and_stay_within_the_budget():
