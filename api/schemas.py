@@ -215,6 +215,9 @@ class ExperimentBand(_Wire):
     median_5: float = Field(description="5 % point of the median of such a generation.")
     median_95: float = Field(description="95 % point of the median of such a generation.")
     w1_95: float = Field(description="95th percentile of its Wasserstein-1 distance to the experiment.")
+    alike: bool = Field(
+        False, description="This generation's W1 is at or below w1_95: it behaves as the experiment does."
+    )
 
 
 class GenerationSummary(_Wire):

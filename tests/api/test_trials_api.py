@@ -138,6 +138,7 @@ def test_generation_summary_gives_median_and_spread_per_generation(client, keys,
         wasserstein_distance(n_t_gen0, measured)
     )
     band = experiment_band(measured, len(n_t_gen0))
+    band["alike"] = wasserstein_distance(n_t_gen0, measured) <= band["w1_95"]
     assert summary[0]["as_experiment"]["n_remaining"] == pytest.approx(band)
 
 

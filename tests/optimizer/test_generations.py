@@ -58,11 +58,24 @@ def test_the_band_narrows_with_more_runs_and_each_generation_carries_its_own():
 
     summary = per_generation(runs, {"n_remaining": MEASURED})
 
-    assert summary[0]["as_experiment"]["n_remaining"] == experiment_band(MEASURED, 15)
-    assert summary[1]["as_experiment"]["n_remaining"] == experiment_band(MEASURED, 3)
+    for entry, n in zip(summary, [15, 3], strict=True):
+        band = entry["as_experiment"]["n_remaining"]
+        assert {key: band[key] for key in ("median_5", "median_95", "w1_95")} == experiment_band(MEASURED, n)
     assert experiment_band(MEASURED, 50)["w1_95"] < experiment_band(MEASURED, 15)["w1_95"] < experiment_band(
         MEASURED, 3
     )["w1_95"]
     # A generation of 15 runs that all measured 4 is no draw from the experiment: W1 beyond the band.
     alike = per_generation([Run(0, "ok", {"n_remaining": 4})] * 15, {"n_remaining": MEASURED})[0]
     assert alike["w1_to_experiment"]["n_remaining"] > alike["as_experiment"]["n_remaining"]["w1_95"]
+    assert alike["as_experiment"]["n_remaining"]["alike"] is False
+
+
+def test_a_generation_is_alike_when_its_w1_is_inside_the_experiments_band():
+    """``alike`` is the one home of the rule the CLI's star, pareto.png's bold and the dashboard read."""
+    like = [Run(0, "ok", {"n_remaining": v}) for v in MEASURED + MEASURED[:5]]
+    emptied = [Run(1, "ok", {"n_remaining": 0})] * 15
+
+    summary = per_generation(like + emptied, {"n_remaining": MEASURED})
+
+    assert [entry["as_experiment"]["n_remaining"]["alike"] for entry in summary] == [True, False]
+    assert summary[0]["w1_to_experiment"]["n_remaining"] <= summary[0]["as_experiment"]["n_remaining"]["w1_95"]

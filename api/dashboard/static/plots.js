@@ -421,7 +421,7 @@ export function generationFigure(trials, responses, maxGeneration, summaries = [
     const label = (g) => {
       const w1 = byGen.get(g);
       if (!Number.isFinite(w1)) return "";
-      return bands.has(g) && w1 <= bands.get(g).w1_95 ? `<b>${w1.toFixed(1)}</b>` : w1.toFixed(1);
+      return bands.has(g) && bands.get(g).alike ? `<b>${w1.toFixed(1)}</b>` : w1.toFixed(1);
     };
     const x = [...byGen.keys()].sort((a, b) => a - b);
     layout.annotations.push(at(x[0] - 0.55, "W1"), ...x.map((g) => at(g, label(g))));
