@@ -200,7 +200,7 @@ def seed_study(
 def _validated_definition() -> StudyDefinition:
     return parse_study({
         "name": "validated-study", "scenario": {},
-        "experiment": {"measured": VALIDATED_MEASURED, "tolerance": 1},
+        "experiment": {"measured": VALIDATED_MEASURED, "tolerance": 2},
         "ga": {"population": 16, "offspring": 8, "generations": 4},
         "validation": {"seeds": 6, "candidates": 3}, "objective_time": "wall",
     })  # fmt: skip
@@ -208,18 +208,21 @@ def _validated_definition() -> StudyDefinition:
 
 def seed_validated_study(store: SqlStore, owner: str = "alice") -> str:
     """A feeder study run to its end by the real driver on synthetic results
-    (``optimizer.memory.synthetic_result``), validation included: on the fresh seeds, every third
-    individual fails its first run (unstable), so the table has a set that failed to reproduce
+    (``optimizer.memory.synthetic_result``), validation included: on the fresh seeds, the second
+    candidate fails its first run (unstable), so the table has a set that failed to reproduce
     beside sets that validate. Returns the study id."""
     from optimizer.memory import SyntheticExecutor, synthetic_result
 
     definition = _validated_definition()
+    candidates: list[int] = []
 
     def respond(spec: TrialSpec) -> SimulationResult:
         result = synthetic_result(spec)
         fresh = spec.generation == definition.validation_batch()
-        if fresh and spec.replicate == VALIDATION_REPLICATE_BASE and spec.individual % 3 == 2:
-            return result.model_copy(update={"status": SimulationStatus.UNSTABLE, "message": "overlap"})
+        if fresh and spec.replicate == VALIDATION_REPLICATE_BASE:
+            candidates.append(spec.individual)
+            if len(candidates) == 2:
+                return result.model_copy(update={"status": SimulationStatus.UNSTABLE, "message": "overlap"})
         return result
 
     study_id = store.create_study(definition.model_dump(mode="json"), owner=owner)

@@ -78,4 +78,5 @@ def test_a_generation_is_alike_when_its_w1_is_inside_the_experiments_band():
     summary = per_generation(like + emptied, {"n_remaining": MEASURED})
 
     assert [entry["as_experiment"]["n_remaining"]["alike"] for entry in summary] == [True, False]
-    assert summary[0]["w1_to_experiment"]["n_remaining"] <= summary[0]["as_experiment"]["n_remaining"]["w1_95"]
+    band = summary[0]["as_experiment"]["n_remaining"]
+    assert summary[0]["w1_to_experiment"]["n_remaining"] <= band["w1_95"]
