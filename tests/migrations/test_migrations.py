@@ -119,13 +119,7 @@ def test_0005_carries_n_t_over_into_named_responses(empty_url):
     )
     try:
         with engine.begin() as connection:
-            connection.execute(
-                sa.text(
-                    "INSERT INTO studies (id, name, status, definition, generation, message, extra, "
-                    "created_at, updated_at) VALUES ('s1', 'old', 'done', '{}', 1, '', '{}', :now, :now)"
-                ),
-                {"now": now},
-            )
+            _insert_finished_study(connection, now)
             connection.execute(
                 sa.text(trial), {"id": "t1", "i": 0, "state": "done", "status": "ok", "n": 4, "now": now}
             )
@@ -207,13 +201,7 @@ def test_0010_copies_each_results_full_load_factor_into_its_trial(empty_url):
     )
     try:
         with engine.begin() as connection:
-            connection.execute(
-                sa.text(
-                    "INSERT INTO studies (id, name, status, definition, generation, message, extra, "
-                    "created_at, updated_at) VALUES ('s1', 'old', 'done', '{}', 1, '', '{}', :now, :now)"
-                ),
-                {"now": now},
-            )
+            _insert_finished_study(connection, now)
             for i, (tid, state, result) in enumerate((
                 ("early", "done", '{"status": "ok", "cost": 10.0, "full_load_factor": 2.5}'),
                 ("older", "done", '{"status": "ok", "cost": 10.0}'),
@@ -233,6 +221,17 @@ def test_0010_copies_each_results_full_load_factor_into_its_trial(empty_url):
             assert "full_load_factor" not in {c["name"] for c in sa.inspect(connection).get_columns("trials")}
     finally:
         engine.dispose()
+
+
+def _insert_finished_study(connection, now: str) -> None:
+    """Study 's1', done, with the columns every revision since 0004 has: the trials' parent row."""
+    connection.execute(
+        sa.text(
+            "INSERT INTO studies (id, name, status, definition, generation, message, extra, "
+            "created_at, updated_at) VALUES ('s1', 'old', 'done', '{}', 1, '', '{}', :now, :now)"
+        ),
+        {"now": now},
+    )
 
 
 def _json(value):
