@@ -63,10 +63,8 @@ def main() -> None:
             # The panels that load on their own: the progress plot and the identifiability table
             # (a slow first build), so that the picture shows them, not "Loading…".
             page.wait_for_function("() => document.getElementById('progress-plot')?.data?.[0]?.x?.length > 0")
-            page.wait_for_function(
-                "() => !['', 'Loading…'].includes(document.querySelector('#identifiability-basis')?.textContent)",
-                timeout=300_000,
-            )
+            basis = "document.querySelector('#identifiability-basis')?.textContent"
+            page.wait_for_function(f"() => !['', 'Loading…'].includes({basis})", timeout=300_000)
             page.wait_for_timeout(500)
             page.screenshot(path=str(args.out / "dashboard-study.png"), full_page=True)
             print(f"wrote {args.out / 'dashboard-study.png'}")
