@@ -3,12 +3,16 @@ run, and for rounded polyhedra the contact geometry split into its parts (broad-
 GJK, the crowned contact, the patch's second moments).
 
     NUMBA_NUM_THREADS=1 python -m benchmarks.profile_engine [--case feeder-polyhedron feeder-clump
-        settling-1k settling-10k] [--time 3.0] [--repeats 30]
+        settling-1k settling-10k] [--time 3.0] [--repeats 30] [--config examples/feeder.toml]
+        [--clogging]
 
 Each figure is the least CPU time (``time.process_time``) of ``--repeats`` timings of one call,
 per step: on a shared machine the least is the figure least disturbed by the others' load.
 ``compute_forces`` is called with ``hist_dt = 0`` (forces re-evaluated without advancing the
-springs), so the state does not move between repeats. Not a test: timings depend on the machine.
+springs), so the state does not move between repeats. The piece pairs that touch are also timed
+in the order a step takes them (GJK warm from the pair's simplex, the crown's feature hulls,
+the rest of the crowned contact, the patch's moments), each row adding one stage. Not a test:
+timings depend on the machine.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import argparse
 import os
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -25,7 +30,7 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from dem.conf import JIT_FLAGS  # noqa: E402
-from dem.convex import gjk_distance, place  # noqa: E402
+from dem.convex import feature_hulls, gjk_distance, gjk_query, gjk_scratch, patch_moments, place  # noqa: E402
 from dem.crown import crowned_contact  # noqa: E402
 from dem.forces import _crown, _sphere_pair_forces, _wall_forces, compute_forces  # noqa: E402
 from dem.integrate import drift, kick, live_rows, update_omega, update_spheres  # noqa: E402
@@ -35,17 +40,20 @@ from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry  # noqa
 FEEDER_CONFIG = "examples/feeder-quick.toml"
 
 
-def feeder_state(representation: str, until: float, seed: int = 1):
-    """The quick feeder's engine (E = 1e7 Pa) run to ``until`` seconds."""
+def feeder_state(
+    representation: str, until: float, seed: int = 1, config_path: str = FEEDER_CONFIG, clogging: bool = False
+):
+    """The feeder's engine (the quick feeder unless ``config_path``; E = 1e7 Pa, and with
+    ``clogging`` benchmarks.feeder's e 0.2, mu 0.9) run to ``until`` seconds."""
     from dem.scenarios.base import merged_params
     from dem.scenarios.feeder import _FeederRun
     from dem.scenarios.feeder_config import load_feeder_config
 
-    config = load_feeder_config(FEEDER_CONFIG)
+    config = load_feeder_config(config_path)
     config.items.representation = representation
     config.stages.vibration_time = max(0.0, until - config.stages.vibration_start)
     config.run.stop_when_empty = False
-    params, problem = merged_params(config.params, {"E": 1e7})
+    params, problem = merged_params(config.params, {"E": 1e7, **({"e": 0.2, "mu": 0.9} if clogging else {})})
     assert not problem, problem
     run = _FeederRun(config, params, seed, None)
     run.execute(time.monotonic(), None, None, None)
@@ -123,6 +131,79 @@ def _rounded_pair_geometry(bodies, spheres, pairs, which):
             )
             from_gjk += r[0]
     return from_gjk
+
+
+@numba.njit(**JIT_FLAGS)
+def _touching_piece_pairs(bodies, spheres, pairs):
+    """The listed pairs of two pieces whose rounded surfaces overlap (``pair_geometry``), from a
+    copy of each pair's axis and simplex."""
+    touching = np.zeros(pairs.count[N_PAIRS], dtype=np.int64)
+    n = 0
+    count, start = spheres.core_count, spheres.core_start
+    for p in range(pairs.count[N_PAIRS]):
+        i, j = pairs.i[p], pairs.j[p]
+        if count[i] == 0 or count[j] == 0:
+            continue
+        ba, bb = spheres.body[i], spheres.body[j]
+        a = place(start[i], count[i], bodies.rot[ba], bodies.pos[ba])
+        b = place(start[j], count[j], bodies.rot[bb], bodies.pos[bb])
+        axis, simplex = pairs.axis[p].copy(), pairs.simplex[p].copy()
+        r = pair_geometry(
+            spheres.core,
+            a,
+            spheres.rounding[i],
+            _crown(spheres.crown, i),
+            spheres.core,
+            b,
+            spheres.rounding[j],
+            _crown(spheres.crown, j),
+            axis,
+            simplex,
+            spheres.work,
+        )
+        if r[0] > 0.0:
+            touching[n] = p
+            n += 1
+    return touching[:n]
+
+
+@numba.njit(**JIT_FLAGS)
+def _touching_stages(bodies, spheres, pairs, touching, stages):
+    """The touching piece pairs' geometry as a step takes it, up to ``stages``: 0 placing the
+    cores and copying the pair's simplex, 1 + GJK warm from it, 2 + the crown's feature hulls, 3
+    + the rest of the crowned contact (its hulls again), 4 + the patch's moments."""
+    total = 0.0
+    count, start, work = spheres.core_count, spheres.core_start, spheres.work
+    for p in touching:
+        i, j = pairs.i[p], pairs.j[p]
+        ba, bb = spheres.body[i], spheres.body[j]
+        a = place(start[i], count[i], bodies.rot[ba], bodies.pos[ba])
+        b = place(start[j], count[j], bodies.rot[bb], bodies.pos[bb])
+        simplex = pairs.simplex[p].copy()
+        s, lam = gjk_scratch(work)
+        total += simplex[0] + s[0, 0]
+        if stages < 1:
+            continue
+        d, ax, ay, az, bx, by, bz = gjk_query(spheres.core, a, spheres.core, b, simplex, s, lam)
+        total += d
+        crown_a, crown_b = _crown(spheres.crown, i), _crown(spheres.crown, j)
+        tol = 4.0 * (crown_a[2] + crown_b[2])
+        if stages == 2:
+            n = ((ax - bx) / d, (ay - by) / d, (az - bz) / d)
+            total += feature_hulls(spheres.core, a, spheres.core, b, d, n, tol, work)[0]
+        if stages < 3:
+            continue
+        r = crowned_contact(
+            spheres.core, a, crown_a, spheres.core, b, crown_b, (ax, ay, az), (bx, by, bz), tol, work
+        )
+        total += r[0]
+        if stages < 4:
+            continue
+        delta = spheres.rounding[i] + spheres.rounding[j] - r[0]
+        total += patch_moments(
+            spheres.core, a, spheres.core, b, (ax, ay, az), (bx, by, bz), delta, tol, work
+        )[0]
+    return total
 
 
 @numba.njit(**JIT_FLAGS)
@@ -204,6 +285,15 @@ def profile(sim, repeats: int) -> list[tuple[str, float]]:
                 lambda: _rounded_facet_geometry(bodies, spheres, walls, lists.wall_pairs),
             ),
         ]
+        touching = _touching_piece_pairs(bodies, spheres, lists.pairs)
+        stages = ("cores placed", "+ GJK (warm)", "+ feature hulls", "+ rest of crown", "+ patch moments")
+        rows += [
+            (
+                f"    {len(touching)} touching piece pairs: {name}",
+                partial(_touching_stages, bodies, spheres, lists.pairs, touching, k),
+            )
+            for k, name in enumerate(stages)
+        ]
     rows += [
         ("kick", lambda: kick(bodies, live, 0.5 * dt)),
         ("drift (restored after)", lambda: (drift(bodies, live, rotors, lb, dt), restore())),
@@ -230,10 +320,12 @@ def main() -> None:
     parser.add_argument("--time", type=float, default=3.0, help="feeder: simulated time of the state, s")
     parser.add_argument("--steps", type=int, default=30_000, help="settling: steps before the state")
     parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--config", default=FEEDER_CONFIG, help="feeder: its configuration")
+    parser.add_argument("--clogging", action="store_true", help="feeder: e 0.2, mu 0.9")
     args = parser.parse_args()
     for case in args.case:
         if case.startswith("feeder-"):
-            sim = feeder_state(case.removeprefix("feeder-"), args.time)
+            sim = feeder_state(case.removeprefix("feeder-"), args.time, 1, args.config, args.clogging)
         else:
             sim = settling_state(int(case.removeprefix("settling-").replace("k", "000")), args.steps)
         n_pairs = int(sim._lists.pairs.count[N_PAIRS])
@@ -245,7 +337,7 @@ def main() -> None:
             f"{n_wall} listed wall pairs, {sim.n_contacts} contacts"
         )
         for name, seconds in profile(sim, args.repeats):
-            print(f"  {name:<36} {1e6 * seconds:10.1f} us")
+            print(f"  {name:<48} {1e6 * seconds:10.1f} us")
 
 
 if __name__ == "__main__":
