@@ -73,7 +73,7 @@ from optimizer.protocols import (
     trial_id,
 )
 from optimizer.replicates import allocate
-from optimizer.seeds import search_seed, search_seeds, validation_seeds
+from optimizer.seeds import search_seed, validation_seeds
 from optimizer.space import ParameterSpace
 from optimizer.study import VALIDATION_REPLICATE_BASE, StudyDefinition, describe_validation_error
 from optimizer.validation import NOT_VALIDATED, PENDING
@@ -298,7 +298,7 @@ class Driver:
             individual=individual,
             generation=batch,
             replicate=replicate,
-            seed=search_seed(definition.seed, replicate, batch, definition.common_seeds == "generation")
+            seed=search_seed(definition.seed, replicate, batch, individual, definition.common_seeds)
             if seed is None
             else seed,
             params=dict(params),
@@ -392,12 +392,7 @@ class Driver:
         if stored:
             return _Batch(index, stored, sorted({spec.individual for spec in stored}), None, None)
         checked = validation.candidates(self._ranked_matches(context, records), definition)
-        used = search_seeds(
-            definition.seed,
-            definition.max_replicates,
-            definition.validation_batch(),
-            definition.common_seeds == "generation",
-        )
+        used = {record.spec.seed for record in records}
         seeds = validation_seeds(definition.seed, definition.validation.seeds, used)
         specs = [
             self._spec(

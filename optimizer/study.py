@@ -346,11 +346,12 @@ class StudyDefinition(_Strict):
         description="Simulations per individual. Common random numbers: replicate r of every "
         "individual of a generation uses the same seed, so sets are compared on the same draws.",
     )
-    common_seeds: Literal["generation", "study"] = Field(
+    common_seeds: Literal["generation", "study", "trial"] = Field(
         "generation",
         description="'generation': each generation draws new common seeds, so the search judges "
         "its survivors on many draws of item shapes and positions; 'study': replicate r keeps one "
-        "seed for the whole study, and the search can fit that one draw (optimizer/seeds.py).",
+        "seed for the whole study, and the search can fit that one draw; 'trial': every "
+        "simulation its own seed, as repeated experiments (optimizer/seeds.py).",
     )
     max_replicates: int | None = Field(
         None,

@@ -136,9 +136,12 @@ def test_pause_withdraws_work_and_resume_finishes_the_same_budget(small_definiti
     assert sum(results_per_trial(store, study_id).values()) == 20
 
 
-def test_validation_reruns_the_fastest_matches_on_seeds_the_search_never_used():
+@pytest.mark.parametrize("common_seeds", ["generation", "study", "trial"])
+def test_validation_reruns_the_fastest_matches_on_seeds_the_search_never_used(common_seeds):
     definition = make_definition(
-        ga={"population": 8, "offspring": 4, "generations": 3}, validation={"seeds": 5, "candidates": 2}
+        ga={"population": 8, "offspring": 4, "generations": 3},
+        validation={"seeds": 5, "candidates": 2},
+        common_seeds=common_seeds,
     )
     store = MemoryStore()
     study_id = start(store, definition)
@@ -224,6 +227,24 @@ def test_common_seeds_study_keeps_one_seed_per_replicate_for_the_whole_study():
     for record in store.trials(study_id):
         seeds.setdefault(record.spec.replicate, set()).add(record.spec.seed)
     assert seeds == {r: {trial_seed(definition.seed, r)} for r in range(3)}
+
+
+def test_common_seeds_trial_gives_every_simulation_its_own_seed():
+    """As repeated experiments: a generation samples the draws instead of sharing one."""
+    definition = make_definition(
+        ga={"population": 6, "offspring": 3, "generations": 2},
+        replicates=2,
+        validation={"seeds": 0},
+        common_seeds="trial",
+    )
+    store = MemoryStore()
+    study_id = start(store, definition)
+
+    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+
+    seeds = [record.spec.seed for record in store.trials(study_id)]
+    assert len(seeds) == (6 + 2 * 3) * 2
+    assert len(set(seeds)) == len(seeds)
 
 
 def test_extra_replicates_go_to_promising_sets_and_stay_within_the_budget():
