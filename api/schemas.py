@@ -215,9 +215,7 @@ class ExperimentBand(_Wire):
     median_5: float = Field(description="5 % point of the median of such a generation.")
     median_95: float = Field(description="95 % point of the median of such a generation.")
     w1_95: float = Field(description="95th percentile of its Wasserstein-1 distance to the experiment.")
-    alike: bool = Field(
-        False, description="This generation's W1 is at or below w1_95: it behaves as the experiment does."
-    )
+    alike: bool = Field(description="The generation's W1 is at or below w1_95: it behaves as the experiment.")
 
 
 class GenerationSummary(_Wire):
@@ -240,8 +238,8 @@ class GenerationSummary(_Wire):
     as_experiment: dict[str, ExperimentBand | None] = Field(
         default_factory=dict,
         description="Per response, where a generation of as many runs drawn from the experiment "
-        "itself would land (a bootstrap of the measured values): W1 below w1_95 means the "
-        "generation behaves as the experiment does, as far as its runs can tell.",
+        "itself would land (a bootstrap of the measured values), and whether the generation is "
+        "alike: behaves as the experiment does, as far as its runs can tell.",
     )
 
 

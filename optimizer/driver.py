@@ -32,7 +32,7 @@ Two ways to use it:
 
 Resuming needs nothing but the store: a new driver on the same store re-asks the GA from the
 state saved after the last completed batch (the search is deterministic, so it proposes the same
-individuals; the stored trials' parameters win if they differ), keeps every recorded result and
+individuals; the stored trials win if they differ: parameters and seeds), keeps every recorded result and
 re-submits only what has none. The study's status is re-read at every step, so pause and cancel
 take effect within one poll.
 
@@ -324,9 +324,11 @@ class Driver:
         genes = search.ask()
         born = _first_batches(records)
         stored: dict[int, dict[str, float]] = {}
+        stored_specs: dict[tuple[int, int], TrialSpec] = {}
         for record in records:
             if record.spec.generation == index and born[record.spec.individual] == index:
                 stored.setdefault(record.spec.individual, record.spec.params)
+                stored_specs[record.spec.individual, record.spec.replicate] = record.spec
         if stored:
             # What was simulated is the truth; the re-ask only restores the search's internal state.
             individuals = sorted(stored)
@@ -349,7 +351,8 @@ class Driver:
             individuals = list(range(first, first + len(genes)))
             extra = self._extra_replicates(study, context, records)
         specs = [
-            self._spec(study.study_id, context, individual, index, replicate, context.space.params(gene))
+            stored_specs.get((individual, replicate))
+            or self._spec(study.study_id, context, individual, index, replicate, context.space.params(gene))
             for individual, gene in zip(individuals, genes, strict=True)
             for replicate in range(definition.replicates)
         ]

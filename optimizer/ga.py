@@ -117,8 +117,9 @@ class InitialSampling(FloatRandomSampling):
 class EvaluatedDuplicateElimination(DefaultDuplicateElimination):
     """pymoo's duplicate check, also against every set already simulated. pymoo compares offspring
     only with the living population, so crossover recreated sets that had died out: 29 of 205 sets
-    asked of NSGA-II on a toy problem, and 8 of 60 simulations of a full-feeder search re-ran a
-    set whose result (same genes, same seeds) was already known."""
+    asked of NSGA-II on a toy problem, and 8 of 60 simulations of a full-feeder search re-ran a set
+    already measured (then on the same seed; with new seeds per generation it would be one more
+    draw at a known point, which the budget buys better as a new set)."""
 
     def __init__(self) -> None:
         super().__init__()

@@ -342,7 +342,7 @@ def write_pareto_png(
     by_generation: dict[int, list[int]] = {}
     failed_by_generation: dict[int, dict[str, int]] = {}
     w1_by_generation: dict[int, float] = {}
-    band_by_generation: dict[int, dict[str, float]] = {}
+    band_by_generation: dict[int, dict[str, Any]] = {}
     for entry in summary_json["generations"]:
         failed_by_generation[entry["generation"]] = entry["failed_by_status"]
         w1 = (entry.get("w1_to_experiment") or {}).get(response)
@@ -370,7 +370,7 @@ def write_pareto_png(
         right.boxplot([by_generation[g] for g in generations], positions=generations)
         # Each generation's W1 to the experiment along the top: a median of noisy single runs
         # can sit on the target by chance; the distance says how like the experiment they are.
-        # Bold: below the 95 % point of the experiment's own resamples of as many runs.
+        # Bold: the generation is alike (its W1 inside the experiment's own band, optimizer/generations.py).
         along_top = right.get_xaxis_transform()
         right.text(generations[0] - 0.5, 1.01, "W1", transform=along_top, ha="right", va="bottom", fontsize=6)
         for g in generations:

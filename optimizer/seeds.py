@@ -20,8 +20,12 @@ stream for the validation.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
+CommonSeeds = Literal["generation", "study", "trial"]
+STUDY_WIDE_SEEDS: CommonSeeds = "study"  # the rule of every study stored before the setting (0011)
 SEARCH_STREAM = 0
 VALIDATION_STREAM = 1
 
@@ -31,13 +35,20 @@ def trial_seed(study_seed: int, replicate: int, stream: int = SEARCH_STREAM) -> 
     return _seed([study_seed, stream, replicate])
 
 
-def search_seed(study_seed: int, replicate: int, batch: int, individual: int, common_seeds: str) -> int:
+def search_seed(
+    study_seed: int, replicate: int, batch: int, individual: int, common_seeds: CommonSeeds
+) -> int:
     """The seed of one search simulation under the study's ``common_seeds``."""
     if common_seeds == "trial":
+        # individual + 1: SeedSequence pads its entropy with zeros, so a trailing 0 would be no word
         return _seed([study_seed, SEARCH_STREAM, replicate, batch, individual + 1])
+    # Batch 0 is the study-wide seed in both other modes (_seed([s, 0, r, 0]) equals it anyway, by
+    # the same padding; written out so that the rule does not rest on numpy's).
     if batch == 0 or common_seeds == "study":
         return trial_seed(study_seed, replicate)
-    return _seed([study_seed, SEARCH_STREAM, replicate, batch])
+    if common_seeds == "generation":
+        return _seed([study_seed, SEARCH_STREAM, replicate, batch])
+    raise ValueError(f"common_seeds: {common_seeds!r} is none of generation, study, trial")
 
 
 def validation_seeds(study_seed: int, count: int, used: set[int]) -> list[int]:

@@ -42,6 +42,7 @@ from dem.parameters import (
     unknown_names_problem,
 )
 from dem.scenarios import registry
+from optimizer.seeds import CommonSeeds
 
 
 class StudyDefinitionError(ValueError):
@@ -343,15 +344,13 @@ class StudyDefinition(_Strict):
         1,
         ge=1,
         le=MAX_REPLICATES,
-        description="Simulations per individual. Common random numbers: replicate r of every "
-        "individual of a generation uses the same seed, so sets are compared on the same draws.",
+        description="Simulations per individual, on the seeds common_seeds says.",
     )
-    common_seeds: Literal["generation", "study", "trial"] = Field(
+    common_seeds: CommonSeeds = Field(
         "generation",
-        description="'generation': each generation draws new common seeds, so the search judges "
-        "its survivors on many draws of item shapes and positions; 'study': replicate r keeps one "
-        "seed for the whole study, and the search can fit that one draw; 'trial': every "
-        "simulation its own seed, as repeated experiments (optimizer/seeds.py).",
+        description="Which simulations share a seed: 'generation' (replicate r of every set of a "
+        "generation; new seeds each generation), 'study' (replicate r, for the whole study) or "
+        "'trial' (none: every simulation its own seed). Why each: optimizer/seeds.py.",
     )
     max_replicates: int | None = Field(
         None,

@@ -175,6 +175,11 @@ def _sort_key(value: float | None) -> float:
     return math.inf if value is None else value
 
 
+# The summary's fields as of this version (2: as_experiment's ``alike``): a part of the ETag's
+# version, so that a browser that cached a finished study's summary before a new field fetches it.
+GENERATIONS_FORMAT = 2
+
+
 def generation_summary_json(
     store: SqlStore, views: StudyViewCache, study_id: str, principal: Principal, held: str | None = None
 ) -> Served:
@@ -184,7 +189,7 @@ def generation_summary_json(
     client's ``If-None-Match``) and one build serves every dashboard."""
     study = store.study_version(study_id, principal.visible_to)
     build = views.builder("generations", _generation_summary, store, study_id)
-    return views.serve("generations", study_id, study.change_number, build, held=held)
+    return views.serve("generations", study_id, (study.change_number, GENERATIONS_FORMAT), build, held=held)
 
 
 def _generation_summary(store: SqlStore, views: StudyViewCache, study_id: str) -> bytes:

@@ -32,6 +32,7 @@ from api.store.base import chunks
 from api.store.studies import StudyStore
 from dem.result import SimulationResult
 from optimizer.protocols import StudyStatus, TrialState
+from optimizer.seeds import STUDY_WIDE_SEEDS
 
 ARCHIVE_FORMAT = "demcal-study-archive/2"
 READABLE_FORMATS = ("demcal-study-archive/1", ARCHIVE_FORMAT)  # 1: a scenario in every trial
@@ -123,6 +124,10 @@ class StudyArchives(StudyStore):
         study_id = study.get("id")
         if not study_id:
             raise InvalidInputError("the archive's study has no id")
+        definition = study.get("definition")
+        if isinstance(definition, dict) and "common_seeds" not in definition:
+            # An archive older than the setting (migration 0011): the seeds it ran on.
+            study["definition"] = {**definition, "common_seeds": STUDY_WIDE_SEEDS}
         if study.get("status") == StudyStatus.RUNNING.value:
             study["status"] = StudyStatus.PAUSED.value
             study["message"] = "restored from an archive; continue it with demcal calibrate --resume"

@@ -164,7 +164,7 @@ def test_tiny_study_runs_and_writes_its_results(tmp_path):
     medians = " ".join(f"{g['n_remaining']['median']:g}" for g in search)
     distances = " ".join(
         f"{g['w1_to_experiment']['n_remaining']:.2f}"
-        + ("*" if g["w1_to_experiment"]["n_remaining"] <= g["as_experiment"]["n_remaining"]["w1_95"] else "")
+        + ("*" if g["as_experiment"]["n_remaining"]["alike"] else "")
         for g in search
     )
     assert f"per generation: median n_remaining {medians} (target" in output

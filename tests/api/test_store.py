@@ -434,3 +434,18 @@ def test_an_archive_from_before_the_full_load_factor_column_restores_it_from_eac
         factors = dict(s.execute(query).all())
     assert archive["trials"][0]["full_load_factor"] == 3.25  # what the archive carries now
     assert factors == {specs[0].trial_id: 3.25, specs[1].trial_id: 1.0}
+
+
+def test_an_archive_from_before_common_seeds_restores_with_the_study_wide_seeds_it_ran_on(store):
+    """Archives made before migration 0011 (benchmarks/paper-study-*.archive.json) ran with one
+    seed per replicate for the whole study; read with today's default they would resume on others."""
+    study_id = store.create_study(_definition(), owner=None)
+    archive = store.archive_study(study_id)
+    store.delete_study(study_id)
+    definition = {k: v for k, v in archive["study"]["definition"].items() if k != "common_seeds"}
+    older = {**archive, "study": {**archive["study"], "definition": definition}}
+
+    store.restore_study(older)
+
+    assert store.load_study(study_id).definition["common_seeds"] == "study"
+    assert "common_seeds" not in older["study"]["definition"]

@@ -63,7 +63,7 @@ def main() -> None:
             # The panels that load on their own: the progress plot and the identifiability table
             # (a slow first build), so that the picture shows them, not "Loading…".
             page.wait_for_function("() => document.getElementById('progress-plot')?.data?.[0]?.x?.length > 0")
-            basis = "document.querySelector('#identifiability-basis')?.textContent"
+            basis = "document.querySelector('#identifiability-basis')?.textContent ?? ''"
             page.wait_for_function(f"() => !['', 'Loading…'].includes({basis})", timeout=300_000)
             page.wait_for_timeout(500)
             page.screenshot(path=str(args.out / "dashboard-study.png"), full_page=True)

@@ -384,7 +384,7 @@ def test_generation_plot_draws_the_target_and_a_median_per_generation(page, dash
         "() => document.getElementById('generation-plot').layout.annotations.map((a) => a.text)"
     )
     bands = [entry["as_experiment"]["n_remaining"] for entry in api]
-    bold = [f"<b>{d:.1f}</b>" if d <= b["w1_95"] else f"{d:.1f}" for d, b in zip(w1, bands, strict=True)]
+    bold = [f"<b>{d:.1f}</b>" if b["alike"] else f"{d:.1f}" for d, b in zip(w1, bands, strict=True)]
     assert bold == labels[labels.index("W1") + 1:labels.index("W1") + 6]
     # Behind each generation, the median's 5-95 % range of as many runs drawn from the experiment.
     shapes = page.evaluate("() => document.getElementById('generation-plot').layout.shapes")

@@ -223,6 +223,34 @@ def test_0010_copies_each_results_full_load_factor_into_its_trial(empty_url):
         engine.dispose()
 
 
+def test_0011_gives_a_study_stored_before_common_seeds_the_study_wide_seeds_it_ran_on(empty_url):
+    upgrade_database(empty_url, "0010")
+    engine = create_db_engine(empty_url)
+    study = (
+        "INSERT INTO studies (id, name, status, definition, generation, message, extra, created_at, "
+        "updated_at) VALUES (:id, 'old', 'paused', :definition, 1, '', '{}', :now, :now)"
+    )
+    now = "2026-11-25 00:00:00"
+    try:
+        with engine.begin() as connection:
+            for sid, definition in (("old", '{"seed": 7}'), ("new", '{"seed": 7, "common_seeds": "trial"}')):
+                connection.execute(sa.text(study), {"id": sid, "definition": definition, "now": now})
+        upgrade_database(empty_url)
+        with engine.connect() as connection:
+            stored = {
+                row.id: _json(row.definition)
+                for row in connection.execute(sa.text("SELECT id, definition FROM studies"))
+            }
+        assert stored["old"] == {"seed": 7, "common_seeds": "study"}
+        assert stored["new"] == {"seed": 7, "common_seeds": "trial"}
+        downgrade_database(empty_url, "0010")
+        with engine.connect() as connection:
+            kept = [_json(row[0]) for row in connection.execute(sa.text("SELECT definition FROM studies"))]
+        assert kept == [{"seed": 7}, {"seed": 7}]
+    finally:
+        engine.dispose()
+
+
 def _insert_finished_study(connection, now: str) -> None:
     """Study 's1', done, with the columns every revision since 0004 has: the trials' parent row."""
     connection.execute(

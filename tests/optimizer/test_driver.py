@@ -82,6 +82,31 @@ def test_resume_after_kill_mid_generation_reruns_nothing_finished(small_definiti
     assert progress.recommendation["params"] == reference.recommendation["params"]
 
 
+def test_a_resumed_batch_runs_its_stored_trials_on_their_stored_seeds(small_definition):
+    """What was simulated is the truth: a study whose seeding rule reads differently on resume (a
+    definition stored before ``common_seeds``, read with today's default) finishes its batch on the
+    seeds its rows hold, not on seeds the rule would give now."""
+    store = MemoryStore()
+    study_id = start(store, small_definition.model_copy(update={"common_seeds": "study"}))
+    first = Driver(store, SyntheticExecutor(per_poll=3))
+    while store.load_study(study_id).generation < 2:
+        first.step(study_id, timeout=0)
+    first.step(study_id, timeout=0)  # batch 2 submitted, 3 of its 4 trials finished
+    stored = {r.spec.trial_id: r.spec.seed for r in store.trials(study_id) if r.spec.generation == 2}
+    assert len(set(stored.values())) == 1
+    store._studies[study_id].definition["common_seeds"] = "generation"
+    submitted = {}
+
+    def respond(spec):
+        submitted[spec.trial_id] = spec.seed
+        return synthetic_result(spec)
+
+    Driver(store, SyntheticExecutor(respond)).step(study_id, timeout=0)
+
+    resubmitted = set(submitted) & set(stored)
+    assert resubmitted and all(submitted[trial] == stored[trial] for trial in resubmitted)
+
+
 class DuplicatingExecutor(SyntheticExecutor):
     """Reports every outcome twice, like a worker presumed dead that was only slow."""
 
@@ -372,3 +397,12 @@ def test_bounds_entirely_invalid_end_the_study_with_a_message_and_no_recommendat
     assert "raise parameters.E" in progress.message
     assert progress.recommendation is None
     assert len(executor.submitted) == 6  # nothing after the initial population
+
+
+def test_validation_seeds_skip_a_seed_the_search_used():
+    from optimizer.seeds import VALIDATION_STREAM, validation_seeds
+
+    clash = trial_seed(7, 0, VALIDATION_STREAM)
+
+    assert validation_seeds(7, 2, {clash}) == [trial_seed(7, k, VALIDATION_STREAM) for k in (1, 2)]
+    assert validation_seeds(7, 2, set())[0] == clash

@@ -53,8 +53,10 @@ def test_restored_state_proposes_the_same_next_batch():
 
 @pytest.mark.parametrize("algorithm", ["nsga2", "spea2"])
 def test_the_ga_never_asks_again_for_a_set_already_simulated(algorithm):
-    """Same genes, same seeds: the result is known. Before, crossover recreated dead sets (29 of
-    205 here for NSGA-II), each a simulation spent for nothing."""
+    """A set already simulated is known (its runs already count in its own and its neighbours'
+    estimates): asking for it again spends a simulation on one more draw at a point the search
+    has already measured, not on a new set. Before, crossover recreated dead sets (29 of 205 here
+    for NSGA-II)."""
     search = create_search(GASettings(algorithm=algorithm, population=10, offspring=5), 4, seed=11)
     asked = []
     for _ in range(40):
