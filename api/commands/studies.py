@@ -127,12 +127,18 @@ def register(app: typer.Typer) -> None:
             study_id = store.restore_study(document)
         except (ConflictError, InvalidInputError) as exc:
             _fail(exc.detail)
+        from optimizer.protocols import FINISHED_STUDIES
+
         study = store.load_study(study_id)
         done = sum(1 for t in document["trials"] if t.get("state") == "done")
-        typer.echo(
-            f"{study_id}: restored, {study.status.value}, {done} of {len(document['trials'])} trials "
-            f"done; continue it with: demcal calibrate --resume {study_id}"
+        # A finished study has nothing to continue: point at what it found instead.
+        then = (
+            f"see it with: demcal studies show {study_id}"
+            if study.status in FINISHED_STUDIES
+            else f"continue it with: demcal calibrate --resume {study_id}"
         )
+        trials = len(document["trials"])
+        typer.echo(f"{study_id}: restored, {study.status.value}, {done} of {trials} trials done; {then}")
 
 
 def _unknown_study(exc) -> None:

@@ -90,3 +90,22 @@ def test_archive_then_restore_moves_a_study_to_another_database(cli, tmp_path, m
     assert again.exit_code == 2 and "already in this database" in again.output
     assert not_json.exit_code == 2 and "not JSON" in not_json.output
     assert missing.exit_code == 2 and "nope.json" in missing.output
+
+
+def test_restoring_a_finished_study_points_at_its_results_not_at_resume(cli, tmp_path, monkeypatch):
+    from api.db import upgrade_database
+    from api.settings import get_settings
+
+    runner, store, study_id = cli
+    store.set_status(study_id, store.load_study(study_id).status.DONE)
+    runner.invoke(app, ["studies", "archive", study_id, "-o", str(tmp_path / "a.json")])
+    (tmp_path / "other").mkdir()
+    monkeypatch.setenv("DEMCAL_DATABASE_URL", f"sqlite:///{tmp_path}/other/demcal.db")
+    get_settings.cache_clear()
+    upgrade_database(f"sqlite:///{tmp_path}/other/demcal.db")
+
+    restored = runner.invoke(app, ["studies", "restore", str(tmp_path / "a.json")])
+
+    assert restored.exit_code == 0, restored.output
+    assert "restored, done" in restored.output and f"demcal studies show {study_id}" in restored.output
+    assert "--resume" not in restored.output
