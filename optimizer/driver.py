@@ -323,12 +323,12 @@ class Driver:
             search = from_bytes(study.ga_state)
         genes = search.ask()
         born = _first_batches(records)
-        stored: dict[int, dict[str, float]] = {}
-        stored_specs: dict[tuple[int, int], TrialSpec] = {}
-        for record in records:
-            if record.spec.generation == index and born[record.spec.individual] == index:
-                stored.setdefault(record.spec.individual, record.spec.params)
-                stored_specs[record.spec.individual, record.spec.replicate] = record.spec
+        stored_specs = {
+            (record.spec.individual, record.spec.replicate): record.spec
+            for record in records
+            if record.spec.generation == index and born[record.spec.individual] == index
+        }
+        stored = {individual: spec.params for (individual, _), spec in stored_specs.items()}
         if stored:
             # What was simulated is the truth; the re-ask only restores the search's internal state.
             individuals = sorted(stored)

@@ -376,7 +376,7 @@ def write_pareto_png(
         for g in generations:
             if g in w1_by_generation:
                 band = band_by_generation.get(g)
-                alike = band is not None and band.get("alike", False)
+                alike = band is not None and band["alike"]
                 right.text(g, 1.01, f"{w1_by_generation[g]:.1f}", transform=along_top, ha="center",
                            va="bottom", fontsize=6, fontweight="bold" if alike else "normal")
     right.axhline(summary_json["target"], color="tab:red", ls="--", lw=1, label="target")

@@ -345,7 +345,7 @@ def _w1_text(entry: dict, response: str) -> str:
     if w1 is None:
         return "-"
     band = (entry.get("as_experiment") or {}).get(response)
-    return f"{w1:.2f}" + ("*" if band and band.get("alike") else "")
+    return f"{w1:.2f}" + ("*" if band and band["alike"] else "")
 
 
 def _n_t(member: dict) -> str:

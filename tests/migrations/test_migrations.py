@@ -176,11 +176,7 @@ def test_0009_settles_the_pending_validation_of_studies_that_ended(empty_url):
                     sa.text(study), {"id": sid, "status": status, "rec": pending, "now": now}
                 )
         upgrade_database(empty_url)
-        with engine.connect() as connection:
-            stored = {
-                row.id: _json(row.recommendation)
-                for row in connection.execute(sa.text("SELECT id, recommendation FROM studies"))
-            }
+        stored = _studies_column(engine, "recommendation")
         assert stored["cancelled"] == {"individual": 3, "validation_status": "not validated"}
         assert stored["running"] == {"individual": 3, "validation_status": "pending"}
     finally:
@@ -236,17 +232,11 @@ def test_0011_gives_a_study_stored_before_common_seeds_the_study_wide_seeds_it_r
             for sid, definition in (("old", '{"seed": 7}'), ("new", '{"seed": 7, "common_seeds": "trial"}')):
                 connection.execute(sa.text(study), {"id": sid, "definition": definition, "now": now})
         upgrade_database(empty_url)
-        with engine.connect() as connection:
-            stored = {
-                row.id: _json(row.definition)
-                for row in connection.execute(sa.text("SELECT id, definition FROM studies"))
-            }
+        stored = _studies_column(engine, "definition")
         assert stored["old"] == {"seed": 7, "common_seeds": "study"}
         assert stored["new"] == {"seed": 7, "common_seeds": "trial"}
         downgrade_database(empty_url, "0010")
-        with engine.connect() as connection:
-            kept = [_json(row[0]) for row in connection.execute(sa.text("SELECT definition FROM studies"))]
-        assert kept == [{"seed": 7}, {"seed": 7}]
+        assert list(_studies_column(engine, "definition").values()) == [{"seed": 7}, {"seed": 7}]
     finally:
         engine.dispose()
 
@@ -260,6 +250,13 @@ def _insert_finished_study(connection, now: str) -> None:
         ),
         {"now": now},
     )
+
+
+def _studies_column(engine: sa.Engine, column: str) -> dict:
+    """Study id -> one JSON column of the studies table, read back by raw SQL."""
+    with engine.connect() as connection:
+        rows = connection.execute(sa.text(f"SELECT id, {column} FROM studies"))
+        return {row[0]: _json(row[1]) for row in rows}
 
 
 def _json(value):

@@ -219,16 +219,10 @@ def test_the_recommendation_is_pending_until_its_validation(seeds, during, after
 def test_common_random_numbers_replicate_r_has_one_seed_across_the_individuals_of_a_generation():
     """Each generation draws new common seeds; generation 0 keeps the study-wide seeds, so a study
     stored before ``common_seeds`` re-runs its initial population on the same draws."""
-    definition = make_definition(
-        ga={"population": 6, "offspring": 3, "generations": 2}, replicates=3, validation={"seeds": 0}
-    )
-    store = MemoryStore()
-    study_id = start(store, definition)
-
-    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    definition, records = _run_seeded(replicates=3)
 
     seeds: dict[tuple[int, int], set[int]] = {}
-    for record in store.trials(study_id):
+    for record in records:
         seeds.setdefault((record.spec.generation, record.spec.replicate), set()).add(record.spec.seed)
     assert sorted(seeds) == [(g, r) for g in range(3) for r in range(3)]
     assert all(len(values) == 1 for values in seeds.values())
@@ -237,39 +231,32 @@ def test_common_random_numbers_replicate_r_has_one_seed_across_the_individuals_o
 
 
 def test_common_seeds_study_keeps_one_seed_per_replicate_for_the_whole_study():
-    definition = make_definition(
-        ga={"population": 6, "offspring": 3, "generations": 2},
-        replicates=3,
-        validation={"seeds": 0},
-        common_seeds="study",
-    )
-    store = MemoryStore()
-    study_id = start(store, definition)
-
-    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    definition, records = _run_seeded(replicates=3, common_seeds="study")
 
     seeds: dict[int, set[int]] = {}
-    for record in store.trials(study_id):
+    for record in records:
         seeds.setdefault(record.spec.replicate, set()).add(record.spec.seed)
     assert seeds == {r: {trial_seed(definition.seed, r)} for r in range(3)}
 
 
 def test_common_seeds_trial_gives_every_simulation_its_own_seed():
     """As repeated experiments: a generation samples the draws instead of sharing one."""
+    _, records = _run_seeded(replicates=2, common_seeds="trial")
+
+    seeds = [record.spec.seed for record in records]
+    assert len(seeds) == (6 + 2 * 3) * 2
+    assert len(set(seeds)) == len(seeds)
+
+
+def _run_seeded(**overrides):
+    """A small study (6 + 2 x 3 sets, no validation) run to its end: its definition and trials."""
     definition = make_definition(
-        ga={"population": 6, "offspring": 3, "generations": 2},
-        replicates=2,
-        validation={"seeds": 0},
-        common_seeds="trial",
+        ga={"population": 6, "offspring": 3, "generations": 2}, validation={"seeds": 0}, **overrides
     )
     store = MemoryStore()
     study_id = start(store, definition)
-
     Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
-
-    seeds = [record.spec.seed for record in store.trials(study_id)]
-    assert len(seeds) == (6 + 2 * 3) * 2
-    assert len(set(seeds)) == len(seeds)
+    return definition, store.trials(study_id)
 
 
 def test_extra_replicates_go_to_promising_sets_and_stay_within_the_budget():
