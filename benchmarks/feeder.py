@@ -24,6 +24,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 from dem.scenarios.feeder import run_feeder  # noqa: E402
 from dem.scenarios.feeder_config import load_feeder_config  # noqa: E402
 
+CLOGGING = {"e": 0.2, "mu": 0.9}  # --clogging: items stay on the tray (also benchmarks.profile_engine)
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -39,7 +41,7 @@ def main() -> None:
     if args.vibration_time is not None:
         config.stages.vibration_time = args.vibration_time
     config.run.stop_when_empty = False  # the benchmark times the whole protocol
-    params = {"e": 0.2, "mu": 0.9} if args.clogging else {}
+    params = dict(CLOGGING) if args.clogging else {}
     header = (
         f"{'shape':>10} {'E, Pa':>8} {'wall, s':>8} {'cpu, s':>7} {'sim, s':>7} {'steps':>9} {'dt, s':>9}"
     )

@@ -53,7 +53,9 @@ def feeder_state(
     config.items.representation = representation
     config.stages.vibration_time = max(0.0, until - config.stages.vibration_start)
     config.run.stop_when_empty = False
-    params, problem = merged_params(config.params, {"E": 1e7, **({"e": 0.2, "mu": 0.9} if clogging else {})})
+    from benchmarks.feeder import CLOGGING
+
+    params, problem = merged_params(config.params, {"E": 1e7, **(CLOGGING if clogging else {})})
     assert not problem, problem
     run = _FeederRun(config, params, seed, None)
     run.execute(time.monotonic(), None, None, None)
