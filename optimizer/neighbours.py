@@ -32,9 +32,10 @@ How:
   paper's study so formed had generation medians of 0.5 and 1). Several experiments: the largest
   ratio W1 / floor must be <= 1.
 
-What it changes: only the F and G the GA compares (f1 = the pooled W1). Views, the Pareto front,
-the recommendation and the validation use each set's own runs and the study's own f1. Failed sets
-(invalid, unstable, ...) keep their own violation: they pool nothing and are pooled by no one.
+What it changes: the F and G the GA compares (f1 = the pooled W1), and which sets the validation
+re-simulates (``pooled_evidence``; ``optimizer/validation.py``). Views, the Pareto front and the
+running recommendation use each set's own runs and the study's own f1. Failed sets (invalid,
+unstable, ...) keep their own violation: they pool nothing and are pooled by no one.
 """
 
 from __future__ import annotations
@@ -46,7 +47,9 @@ import numpy as np
 from scipy.stats import wasserstein_distance
 
 from optimizer.noise import wasserstein_floor
-from optimizer.study import NOISE_FLOOR_QUANTILE
+from optimizer.objectives import Evaluation, match_rule, observation
+from optimizer.space import ParameterSpace
+from optimizer.study import NOISE_FLOOR_QUANTILE, StudyDefinition
 from optimizer.surrogate import MatchRule, Observation
 
 BANDWIDTH = 0.2  # h in genes: a neighbour 0.1 away weighs 0.88, 0.2 away 0.61, 0.4 away 0.14
@@ -120,3 +123,25 @@ class NeighbourEstimate:
             return objectives, constraints
         objectives[rows, 0], constraints[rows, 0] = self.distances(np.asarray(genes, dtype=float)[rows])
         return objectives, constraints
+
+
+def pooled_evidence(
+    evaluations: Sequence[Evaluation], definition: StudyDefinition, space: ParameterSpace
+) -> dict[int, tuple[float, float]] | None:
+    """Each measured set's pooled W1 and violation over the whole search's history, by individual:
+    what the GA's estimate reads after its last generation, rebuilt from the stored runs. None for
+    a study whose search does not rank on it (``ga.match_estimate = "own"``)."""
+    if definition.ga.match_estimate != "neighbours":
+        return None
+    rule = match_rule(definition, definition.n_items())
+    estimate = NeighbourEstimate(rule if isinstance(rule, tuple) else (rule,))
+    measured = [evaluation for evaluation in evaluations if evaluation.ok]
+    if not measured:
+        return {}
+    genes = np.array([space.genes(evaluation.params) for evaluation in measured])
+    estimate.remember(genes, [observation(evaluation) for evaluation in measured])
+    w1, violation = estimate.distances(genes)
+    return {
+        evaluation.individual: (float(w), float(v))
+        for evaluation, w, v in zip(measured, w1, violation, strict=True)
+    }

@@ -58,6 +58,18 @@ def _distance(space: ParameterSpace, a: Evaluation, b: Evaluation) -> float:
     return float(np.linalg.norm(difference) / math.sqrt(max(space.n_genes, 1)))
 
 
+def distinct(
+    ordered: Sequence[Evaluation], space: ParameterSpace, min_distance: float = DEFAULT_MIN_DISTANCE
+) -> list[Evaluation]:
+    """The sets of ``ordered``, best first, that lie at least ``min_distance`` from every set
+    kept before them: one set per region, so a list of alternatives does not repeat one set."""
+    listed: list[Evaluation] = []
+    for candidate in ordered:
+        if all(_distance(space, candidate, kept) >= min_distance for kept in listed):
+            listed.append(candidate)
+    return listed
+
+
 def rank(
     evaluations: Sequence[Evaluation],
     tolerance: float,
@@ -73,10 +85,7 @@ def rank(
         ),
         key=lambda ev: (ev.f2, ev.f1, ev.individual),
     )
-    listed: list[Evaluation] = []
-    for candidate in matching:
-        if all(_distance(space, candidate, kept) >= min_distance for kept in listed):
-            listed.append(candidate)
+    listed = distinct(matching, space, min_distance)
     all_fronts = fronts(evaluations)
     return Ranking(
         pareto=all_fronts[0] if all_fronts else [],

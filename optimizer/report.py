@@ -167,10 +167,12 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         "simulations_until_first_match": first_match(records, definition),
         "best_f1": ranking.best_f1,
         "failures": failures_json(records),
-        # The stored recommendation is the driver's: after the validation, the fastest validated set.
+        # The stored recommendation is the driver's: after the validation, the fastest validated set
+        # (``chosen_by`` says how it was chosen).
         "recommendation": study.recommendation
         or (summary(ranking.recommendation) if ranking.recommendation else None),
         "validation_status": (study.recommendation or {}).get("validation_status"),
+        "chosen_by": (study.recommendation or {}).get("chosen_by"),
         "validation": (study.recommendation or {}).get("validation", []),
         "equivalent": [summary(evaluation) for evaluation in ranking.equivalent],
         "pareto": [summary(evaluation) for evaluation in ranking.pareto],

@@ -240,7 +240,7 @@ class Validation(_Strict):
         10, ge=0, le=200, description="Fresh seeds per candidate; 0 skips the validation."
     )
     candidates: int = Field(
-        3, ge=1, le=20, description="The fastest matching sets validated (the recommendation first)."
+        3, ge=1, le=20, description="The search's best candidates validated (optimizer/validation.py)."
     )
 
     def simulations(self) -> int:

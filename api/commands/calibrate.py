@@ -299,8 +299,10 @@ def _report(console, store, study_id: str, results: Path) -> None:
         )
     else:
         params = ", ".join(f"{name} = {value:.4g}" for name, value in recommendation["params"].items())
+        validated = summary.get("validation_status") == "validated"
+        chosen = recommendation.get("chosen_by") or ("the fastest validated set" if validated else "the fastest match")
         console.print(
-            f"[bold green]Recommended[/] (individual {recommendation['individual']}, fastest match): "
+            f"[bold green]Recommended[/] (individual {recommendation['individual']}, {chosen}): "
             f"{params}; "
             f"{response} {recommendation['n_remaining']}, {recommendation['wall_time_s']:.1f} s wall "
             "for the whole protocol"
@@ -449,8 +451,11 @@ def _validation_table(console, summary: dict) -> None:
     )
     # nu and nu_wall hardly matter: kept narrow
     names = [name for name in rows[0]["params"] if item_parameter(name) != "nu"]
+    # A GA ranked on pooled neighbours chose its candidates on their pooled W1 (optimizer/validation.py)
+    pooled = any(row.get("search_pooled_w1") is not None for row in rows)
     for column in ("individual", *(_parameter_header(name) for name in names), "search f1",
-                   f"fresh {response}", "median [90 %]", "W1", "f1 [90 %]", "verdict"):  # fmt: skip
+                   *(["pooled W1"] if pooled else []), f"fresh {response}", "median [90 %]", "W1",
+                   "f1 [90 %]", "verdict"):  # fmt: skip
         table.add_column(column, justify="right")
     for row in rows:
         params = row["params"]
@@ -462,11 +467,26 @@ def _validation_table(console, summary: dict) -> None:
         colour = "green" if row["verdict"] == "validated" else "red"
         table.add_row(
             str(row["individual"]), *(_parameter_cell(name, params) for name in names),
-            f"{row['search_f1']:.2f}", fresh, median, "-" if row["w1"] is None else f"{row['w1']:.2f}",
+            f"{row['search_f1']:.2f}", *([_pooled(row)] if pooled else []), fresh, median,
+            "-" if row["w1"] is None else f"{row['w1']:.2f}",
             f1, f"[{colour}]{row['verdict']}[/]",
         )  # fmt: skip
     console.print(table)
-    console.print(f"Recommendation: {summary['validation_status']} (the fastest validated set).")
+    if pooled:
+        console.print(
+            "pooled W1: each candidate's search runs pooled with its neighbours' (ga.match_estimate), "
+            "which chose the candidates; * within the experiment's noise floor."
+        )
+    status = summary["validation_status"]
+    chosen = summary.get("chosen_by") or ("the fastest validated set" if status == "validated" else "")
+    console.print(f"Recommendation: {status}" + (f" ({chosen})." if chosen else "."))
+
+
+def _pooled(row: dict) -> str:
+    """The search's pooled W1 of a candidate, starred when that estimate called it feasible."""
+    if row.get("search_pooled_w1") is None:
+        return "-"
+    return f"{row['search_pooled_w1']:.2f}" + ("*" if row["search_pooled_violation"] <= 0 else "")
 
 
 def _median(values: list[float]) -> float:

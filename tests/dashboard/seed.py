@@ -197,23 +197,24 @@ def seed_study(
     return seeded
 
 
-def _validated_definition() -> StudyDefinition:
+def _validated_definition(match_estimate: str = "own") -> StudyDefinition:
     return parse_study({
         "name": "validated-study", "scenario": {},
         "experiment": {"measured": VALIDATED_MEASURED, "tolerance": 2},
-        "ga": {"population": 16, "offspring": 8, "generations": 4},
+        "ga": {"population": 16, "offspring": 8, "generations": 4, "match_estimate": match_estimate},
         "validation": {"seeds": 6, "candidates": 3}, "objective_time": "wall",
     })  # fmt: skip
 
 
-def seed_validated_study(store: SqlStore, owner: str = "alice") -> str:
+def seed_validated_study(store: SqlStore, owner: str = "alice", match_estimate: str = "own") -> str:
     """A feeder study run to its end by the real driver on synthetic results
     (``optimizer.memory.synthetic_result``), validation included: on the fresh seeds, the second
     candidate fails its first run (unstable), so the table has a set that failed to reproduce
-    beside sets that validate. Returns the study id."""
+    beside sets that validate. ``match_estimate = "neighbours"``: its GA ranks pooled neighbours,
+    which choose the candidates. Returns the study id."""
     from optimizer.memory import SyntheticExecutor, synthetic_result
 
-    definition = _validated_definition()
+    definition = _validated_definition(match_estimate)
     candidates: list[int] = []
 
     def respond(spec: TrialSpec) -> SimulationResult:

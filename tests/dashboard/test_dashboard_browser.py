@@ -688,6 +688,25 @@ def test_the_equally_good_sets_show_f2_as_ranked_of_the_whole_protocol(page, das
     assert header == "T of the whole protocol (s)"  # the seeded study's objective_time is "wall"
 
 
+def test_the_validation_table_of_a_pooled_search_shows_the_pooled_w1_beside_the_own_f1(page, dashboard):
+    """The candidates of a GA ranked on pooled neighbours were chosen on their pooled W1: each row
+    shows it beside the set's own f1, starred where that estimate called the set feasible."""
+    study_id = seed_validated_study(dashboard.store, match_estimate="neighbours")
+    table = dashboard.store.get_study(study_id).recommendation["validation"]
+    page.goto(dashboard.url(f"/studies/{study_id}"))
+    page.wait_for_selector("#validation-table tbody tr")
+
+    rows = page.locator("#validation-table tbody tr").all_inner_texts()
+    intro = page.locator("#recommendation p").first.inner_text()
+
+    chosen_by = dashboard.store.get_study(study_id).recommendation["chosen_by"]
+    assert intro == f"{chosen_by[0].upper()}{chosen_by[1:]} (fresh seeds, table below):"
+    assert table and all(row["search_pooled_w1"] is not None for row in table)
+    for row, text in zip(table, rows, strict=True):
+        star = "*" if row["search_pooled_violation"] <= 0 else ""
+        assert f"{js_fmt(row['search_f1'])} · pooled W1 {js_fmt(row['search_pooled_w1'])}{star}" in text
+
+
 def test_the_validation_table_shows_what_the_driver_stored_after_validating(page, dashboard):
     study_id = seed_validated_study(dashboard.store)
     stored = dashboard.store.get_study(study_id).recommendation

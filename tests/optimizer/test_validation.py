@@ -7,9 +7,13 @@ import numpy as np
 import pytest
 
 from dem.result import SimulationResult, SimulationStatus
+from optimizer.driver import recommend
+from optimizer.neighbours import pooled_evidence
 from optimizer.objectives import Evaluation
+from optimizer.pareto import rank
 from optimizer.protocols import TrialRecord, TrialSpec, TrialState
-from optimizer.validation import NOT_REPRODUCED, VALIDATED, check
+from optimizer.space import ParameterSpace
+from optimizer.validation import NOT_REPRODUCED, VALIDATED, candidates, check
 from tests.optimizer.conftest import make_definition
 
 # A fixed experiment the cases below were built around (median 5), not a copy of the example.
@@ -113,3 +117,107 @@ def test_validation_on_a_bimodal_response_keeps_its_size_and_rejects_a_set_that_
     validated that set on its real fresh runs (benchmarks/validation_power.py)."""
     assert _rejection_rate(FEEDER_TRUTH) <= 0.14
     assert _rejection_rate(FEEDER_EMPTIES_TOO_OFTEN) >= 0.6
+
+
+# Three regions of the paper's study in miniature (one run a set, target 4, tolerance 0.5):
+# A draws as the experiment does but no run of it is 4; B and C jam or empty, each with one lucky 4.
+PAPER = [0, 0, 1, 2, 3, 4, 4, 12, 15, 16]
+REGIONS = {
+    "A": ({"E": 1e8, "nu": 0.2, "e": 0.3, "mu": 0.5}, [0, 0, 1, 2, 3, 5, 5, 12, 15, 16]),
+    "B": ({"E": 1e6, "nu": 0.4, "e": 0.8, "mu": 0.9}, [12, 13, 14, 15, 16, 4, 13, 14, 15, 16]),
+    "C": ({"E": 1e9, "nu": 0.0, "e": 0.1, "mu": 0.1}, [0, 0, 0, 0, 0, 4, 0, 0, 0, 0]),
+}
+
+
+def _paper_search(match_estimate: str):
+    """One run a set, ten sets a region, neighbours within 0.01 in genes; A's sets are the
+    slowest, so the lucky 4s of B and C are the fastest own-run matches."""
+    definition = make_definition(
+        replicates=1, experiment={"measured": PAPER}, ga={"match_estimate": match_estimate}
+    )
+    space = ParameterSpace(definition.parameters)
+    evaluations, region_of = [], {}
+    for offset, (name, (centre, runs)) in enumerate(REGIONS.items()):
+        for k, n in enumerate(runs):
+            individual = 10 * offset + k
+            params = space.params(space.genes(centre) + 0.001 * k)
+            f2 = 10.0 + individual if name == "A" else 1.0 + individual / 100
+            f1 = abs(n - 4)
+            evaluations.append(Evaluation(individual, 0, params, f1, f2, [n], f2, f2, [f"t{individual}"]))
+            region_of[individual] = name
+    ranking = rank(evaluations, definition.match_tolerance(), space)
+    return definition, space, evaluations, ranking, region_of
+
+
+def test_a_search_ranked_on_own_runs_validates_its_fastest_own_run_matches():
+    definition, space, evaluations, ranking, region_of = _paper_search("own")
+
+    pooled = pooled_evidence(evaluations, definition, space)
+    checked = candidates(ranking, evaluations, space, definition, pooled)
+
+    assert pooled is None
+    assert [region_of[ev.individual] for ev in checked] == ["B", "C"]
+
+
+def test_a_search_ranked_on_pooled_neighbours_validates_what_the_estimate_calls_feasible_first():
+    """Region A's runs pooled are the experiment's draws (pooled W1 0.2): one of its sets goes
+    first although its own run is 4 items off; the lucky 4s of B and C follow, by how far their
+    pooled runs lie from the experiment (B's jams 10.2 items, C's emptied tray 5.3)."""
+    definition, space, evaluations, ranking, region_of = _paper_search("neighbours")
+
+    pooled = pooled_evidence(evaluations, definition, space)
+    checked = candidates(ranking, evaluations, space, definition, pooled)
+
+    assert [region_of[ev.individual] for ev in checked] == ["A", "C", "B"]
+    assert checked[0].f1 > definition.match_tolerance()  # its own run does not match
+    first = checked[0].individual
+    assert pooled[first][1] <= 0 < pooled[checked[1].individual][1] < pooled[checked[2].individual][1]
+    assert pooled[first][0] == pytest.approx(0.2, abs=0.05)
+
+
+def _fresh(individual: int, values, batch: int) -> list[TrialRecord]:
+    records = []
+    for k, n in enumerate(values):
+        spec = TrialSpec(f"s-{individual}-{k}", "s", individual, batch, 100 + k, 9000 + k, {}, {})
+        result = SimulationResult(status=SimulationStatus.OK, n_items=30, n_remaining=int(n), cost=1.0)
+        records.append(TrialRecord(spec, TrialState.DONE, result))
+    return records
+
+
+def _validate(fresh_of_region: dict[str, list[int]]):
+    """The paper search in miniature, its candidates re-simulated with the given fresh values."""
+    definition, space, evaluations, ranking, region_of = _paper_search("neighbours")
+    pooled = pooled_evidence(evaluations, definition, space)
+    checked = {
+        region_of[ev.individual]: ev.individual
+        for ev in candidates(ranking, evaluations, space, definition, pooled)
+    }
+    batch = definition.validation_batch()
+    records = [
+        record for name, values in fresh_of_region.items() for record in _fresh(checked[name], values, batch)
+    ]
+    _, recommendation, verdict = recommend(evaluations, records, definition, space, final=True)
+    return recommendation, verdict, checked, region_of
+
+
+def test_the_recommendation_is_the_validated_set_both_its_fresh_runs_and_its_pooled_neighbours_call_a_match():
+    """A and C both validate; C is faster, but its pooled runs (an emptied tray) say it does not
+    match, A's say it does: A is recommended, C and B stay listed, each row with its evidence."""
+    jams = [n + 9 for n in PAPER]
+
+    recommendation, verdict, checked, region_of = _validate({"A": PAPER, "C": PAPER, "B": jams})
+
+    rows = recommendation["validation"]
+    assert [region_of[row["individual"]] for row in rows] == ["A", "C", "B"]
+    assert [row["verdict"] for row in rows] == [VALIDATED, VALIDATED, NOT_REPRODUCED]
+    assert recommendation["individual"] == checked["A"] and recommendation["validation_status"] == VALIDATED
+    assert f"recommended individual {checked['A']}, validated" in verdict
+    assert {checked["B"], checked["C"]} <= {ev["individual"] for ev in recommendation["equivalent"]}
+    assert rows[0]["search_pooled_violation"] <= 0 < rows[1]["search_pooled_violation"]
+
+
+def test_when_no_pooled_match_validates_the_recommendation_is_the_fastest_validated_set():
+    recommendation, _, checked, _ = _validate({"A": [n + 9 for n in PAPER], "C": PAPER, "B": PAPER})
+
+    assert recommendation["validation_status"] == VALIDATED
+    assert recommendation["individual"] == checked["B"]  # B's sets are faster than C's

@@ -210,6 +210,13 @@ const INTRO = {
   "not reproduced": "No candidate reproduced the experiment on fresh seeds (table below); the fastest match of the search:",
 };
 
+// How the driver chose the recommendation after the validation (optimizer/driver.py _chosen_by);
+// studies stored before it said so read INTRO.
+function chosenBy(rec) {
+  if (rec.validation_status !== "validated" || !rec.chosen_by) return "";
+  return `${rec.chosen_by[0].toUpperCase()}${rec.chosen_by.slice(1)} (fresh seeds, table below):`;
+}
+
 // A polled view's JSON, whether the server said it is of the study's current version, and for a
 // stale one when a newer one can be ready at the earliest (Date.now() time; 0: ask at any poll).
 async function view(path) {
@@ -249,7 +256,7 @@ function renderRecommendation(body) {
     const dl = el("dl", { class: "facts" }, ...rows.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
     const verdict = rec.validation_status; // a study that ended before its check stores "not validated"
     box.replaceChildren(
-      el("p", { text: INTRO[verdict] || (responses.length === 1
+      el("p", { text: chosenBy(rec) || INTRO[verdict] || (responses.length === 1
         ? `The fastest Pareto member whose ${responseText(responses[0])} matches the experiment within tolerance:`
         : "The fastest Pareto member whose responses match every experiment within tolerance:") }),
       verdict ? el("p", { id: "validation-status" }, "Validation: ",
@@ -280,6 +287,14 @@ function renderRecommendation(body) {
 // The validation that ends a study (optimizer/validation.py): each candidate's fresh-seed values
 // of the first experiment's response (its "n_remaining" field, whatever the response) against
 // the experiment, with W1, the median and f1 with their bootstrap intervals.
+// A GA ranked on pooled neighbours (ga.match_estimate) chose its candidates on their pooled W1:
+// shown beside the set's own f1, starred when that estimate called the set feasible.
+function searchF1(row) {
+  if (row.search_pooled_w1 == null) return fmt(row.search_f1, 3);
+  const star = row.search_pooled_violation <= 0 ? "*" : "";
+  return `${fmt(row.search_f1, 3)} · pooled W1 ${fmt(row.search_pooled_w1, 3)}${star}`;
+}
+
 function renderValidation(rows, measured) {
   const section = document.getElementById("validation");
   section.hidden = rows.length === 0;
@@ -298,7 +313,7 @@ function renderValidation(rows, measured) {
     { "data-individual": row.individual },
     el("td", { text: `i${row.individual}` }),
     ...paramCells(row.params),
-    el("td", { class: "num", text: fmt(row.search_f1, 3) }),
+    el("td", { class: "num", text: searchF1(row) }),
     el("td", { class: "num", text: (row.n_remaining || []).join(", ") +
       (row.failures?.length ? ` + ${row.failures.length} failed` : "") }),
     el("td", { class: "num", text: `${fmt(row.median)} ${interval(row.median_interval)}`.trim() }),
