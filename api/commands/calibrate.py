@@ -300,7 +300,8 @@ def _report(console, store, study_id: str, results: Path) -> None:
     else:
         params = ", ".join(f"{name} = {value:.4g}" for name, value in recommendation["params"].items())
         validated = summary.get("validation_status") == "validated"
-        chosen = recommendation.get("chosen_by") or ("the fastest validated set" if validated else "the fastest match")
+        fallback = "the fastest validated set" if validated else "the fastest match"  # older studies
+        chosen = recommendation.get("chosen_by") or fallback
         console.print(
             f"[bold green]Recommended[/] (individual {recommendation['individual']}, {chosen}): "
             f"{params}; "
