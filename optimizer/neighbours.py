@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.stats import wasserstein_distance
@@ -125,12 +126,22 @@ class NeighbourEstimate:
         return objectives, constraints
 
 
+class PooledMatch(NamedTuple):
+    """What the search's runs around a set say of it: the pooled W1 and its violation (as the GA
+    ranks it), and the share of the neighbourhood's runs that failed (invalid, unstable, ...),
+    weighted as the pooling weighs them, which the pooled W1 leaves out."""
+
+    w1: float
+    violation: float
+    failed_share: float
+
+
 def pooled_evidence(
     evaluations: Sequence[Evaluation], definition: StudyDefinition, space: ParameterSpace
-) -> dict[int, tuple[float, float]] | None:
-    """Each measured set's pooled W1 and violation over the whole search's history, by individual:
-    what the GA's estimate reads after its last generation, rebuilt from the stored runs. None for
-    a study whose search does not rank on it (``ga.match_estimate = "own"``)."""
+) -> dict[int, PooledMatch] | None:
+    """Each measured set's pooled match over the whole search's history, by individual: what the
+    GA's estimate reads after its last generation, rebuilt from the stored runs. None for a study
+    whose search does not rank on it (``ga.match_estimate = "own"``)."""
     if definition.ga.match_estimate != "neighbours":
         return None
     rule = match_rule(definition, definition.n_items())
@@ -141,7 +152,13 @@ def pooled_evidence(
     genes = np.array([space.genes(evaluation.params) for evaluation in measured])
     estimate.remember(genes, [observation(evaluation) for evaluation in measured])
     w1, violation = estimate.distances(genes)
+    every = np.array([space.genes(evaluation.params) for evaluation in evaluations])
+    runs = np.array([max(evaluation.n_replicates, 1) for evaluation in evaluations], dtype=float)
+    failed = np.array([not evaluation.ok for evaluation in evaluations], dtype=float)
+    gap = np.linalg.norm(genes[:, None, :] - every[None, :, :], axis=2)
+    weights = np.exp(-0.5 * (gap / estimate.bandwidth) ** 2) * runs
+    failed_share = (weights * failed).sum(axis=1) / weights.sum(axis=1)
     return {
-        evaluation.individual: (float(w), float(v))
-        for evaluation, w, v in zip(measured, w1, violation, strict=True)
+        evaluation.individual: PooledMatch(float(w), float(v), float(f))
+        for evaluation, w, v, f in zip(measured, w1, violation, failed_share, strict=True)
     }

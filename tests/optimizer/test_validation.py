@@ -221,3 +221,32 @@ def test_when_no_pooled_match_validates_the_recommendation_is_the_fastest_valida
 
     assert recommendation["validation_status"] == VALIDATED
     assert recommendation["individual"] == checked["B"]  # B's sets are faster than C's
+
+
+def test_a_pooled_match_whose_neighbours_often_fail_is_no_candidate():
+    """Region D draws as the experiment does where its runs measure, but 3 of its 10 sets ended
+    invalid: ten fresh runs there would rarely all measure, so D gives no candidate (calibration
+    19: #11, E 9.3e5 Pa, its neighbours 22 % failed, 8 of 10 fresh runs invalid)."""
+    definition, space, evaluations, ranking, region_of = _paper_search("neighbours")
+    centre = space.genes({"E": 1e5 * 3, "nu": 0.1, "e": 0.2, "mu": 0.85})
+    for k, n in enumerate([0, 1, 3, 5, 12, 15, 16, None, None, None]):
+        individual = 40 + k
+        params = space.params(centre + 0.001 * k)
+        if n is None:
+            failed = "invalid: body 1 overlapped 0.51 of a sphere radius (limit 0.5)"
+            evaluations.append(Evaluation(individual, 0, params, 26.0, 0.1, [30], 0.1, 0.1,
+                                          [f"t{individual}"], failure=failed, status="invalid",
+                                          g_validity=1.0))  # fmt: skip
+        else:
+            evaluations.append(
+                Evaluation(individual, 0, params, abs(n - 4), 0.1, [n], 0.1, 0.1, [f"t{individual}"])
+            )
+        region_of[individual] = "D"
+
+    pooled = pooled_evidence(evaluations, definition, space)
+    checked = candidates(ranking, evaluations, space, definition, pooled)
+
+    d_sets = [i for i in pooled if region_of[i] == "D"]
+    assert min(pooled[i].violation for i in d_sets) <= 0  # D's measured runs alone would match
+    assert min(pooled[i].failed_share for i in d_sets) > 0.2
+    assert [region_of[ev.individual] for ev in checked] == ["A", "C", "B"]
