@@ -177,7 +177,7 @@ class StudyRead(_Wire):
         None,
         description="The fastest validated set, its 'validation_status' (pending while the search "
         "runs, then validated or not reproduced; not validated without validation seeds) and, after "
-        "the validation, the 'validation' table.",
+        "the validation, the 'validation' table and 'chosen_by' (how it was chosen).",
     )
     warnings: list[str] = Field(
         default_factory=list, description="What to know before trusting the study (bounds in the "

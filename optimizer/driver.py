@@ -608,23 +608,23 @@ def _validated(
     against the experiment's 3.5 passed, W1 3.40 against a limit of 3.60; its pooled runs said
     it jams too often, and the one set both called a match gave 3.5: calibration 18)."""
     pooled = pooled_evidence(evaluations, definition, space)
-    checked = validation.candidates(ranking, evaluations, space, definition, pooled)
+    checked = _checked(ranking, evaluations, records, definition, space, pooled)
     if not checked:
         return None, _verdict(ranking)
     rows = validation.table(checked, records, definition, pooled) if definition.validation.seeds else []
     validated = [i for i, row in enumerate(rows) if row["verdict"] == validation.VALIDATED]
-    doubted = [
-        row["search_pooled_violation"] is not None and row["search_pooled_violation"] > 0 for row in rows
-    ]
+    doubted = [(row["search_pooled_violation"] or 0.0) > 0 for row in rows]  # None: not pooled
     chosen = min(validated, key=lambda i: (doubted[i], checked[i].f2, i)) if validated else None
     status = (
         validation.VALIDATED
         if chosen is not None
         else (validation.NOT_REPRODUCED if definition.validation.seeds else NOT_VALIDATED)
     )
-    pick = checked[chosen if chosen is not None else 0]
+    # Nothing validated: the search's fastest match stays, as in a study without pooled candidates.
+    pick = checked[chosen] if chosen is not None else (ranking.recommendation or checked[0])
     own = [] if ranking.recommendation is None else [ranking.recommendation, *ranking.equivalent]
-    others = {ev.individual: ev for ev in [*checked, *own] if ev.individual != pick.individual}
+    alike = [*own, *(checked[i] for i in validated)]  # sets that matched in the search or on fresh seeds
+    others = {ev.individual: ev for ev in alike if ev.individual != pick.individual}
     recommendation = {
         **summary(pick),
         "target": definition.experiment.target(),
@@ -633,7 +633,11 @@ def _validated(
         "equivalent": [summary(ev) for ev in others.values()],
         "validation_status": status,
         "validation": rows,
-        "chosen_by": _chosen_by(status, pooled is not None and chosen is not None and not doubted[chosen]),
+        "chosen_by": _chosen_by(
+            status,
+            pick is ranking.recommendation,
+            pooled is not None and chosen is not None and not doubted[chosen],
+        ),
     }
     if status == validation.VALIDATED:
         row = rows[chosen]
@@ -644,22 +648,46 @@ def _validated(
     elif status == NOT_VALIDATED:
         verdict = f"recommended individual {pick.individual}, not validated (validation.seeds = 0)"
     else:
-        verdict = (
-            f"no candidate reproduced the experiment on fresh seeds ({len(rows)} tried); individual "
-            f"{pick.individual} is the search's first candidate, not reproduced"
-        )
+        verdict = f"{recommendation['chosen_by']} ({len(rows)} tried): individual {pick.individual}"
     return recommendation, verdict
 
 
-def _chosen_by(status: str, pooled_match: bool) -> str:
+def _checked(
+    ranking: Ranking,
+    evaluations: list[Evaluation],
+    records: list[TrialRecord],
+    definition: StudyDefinition,
+    space: ParameterSpace,
+    pooled: dict | None,
+) -> list[Evaluation]:
+    """The validated sets, in the candidates' order: the candidates as ``_validation_batch`` chose
+    them, but once a validation batch is stored, exactly its sets (a batch stored by an earlier
+    rule, then resumed, keeps the sets it ran)."""
+    checked = validation.candidates(ranking, evaluations, space, definition, pooled)
+    batch = definition.validation_batch()
+    stored = {record.spec.individual for record in records if record.spec.generation == batch}
+    if not stored:
+        return checked
+    by_individual = {evaluation.individual: evaluation for evaluation in evaluations}
+    kept = [evaluation for evaluation in checked if evaluation.individual in stored]
+    missed = sorted(stored - {evaluation.individual for evaluation in kept})
+    return kept + [by_individual[i] for i in missed if i in by_individual]
+
+
+def _chosen_by(status: str, fastest_match: bool, pooled_match: bool) -> str:
     """How the recommendation after the validation was chosen, as the CLI and the dashboard say it."""
     if status == validation.VALIDATED:
         return "the fastest validated parameter set" + (
             " that its pooled search neighbours call a match too" if pooled_match else ""
         )
+    which = (
+        "the fastest match of the search"
+        if fastest_match
+        else "the set the search's pooled estimate ranks first (its own runs not within tolerance)"
+    )
     if status == validation.NOT_REPRODUCED:
-        return "no candidate reproduced the experiment on fresh seeds; the search's first candidate"
-    return "the fastest match of the search, not validated"
+        return f"no candidate reproduced the experiment on fresh seeds; {which}"
+    return f"{which}, not validated"
 
 
 def _verdict(ranking: Ranking) -> str:

@@ -52,20 +52,26 @@ class Ranking:
     best_f1: float | None
 
 
-def _distance(space: ParameterSpace, a: Evaluation, b: Evaluation) -> float:
+def gene_distance(space: ParameterSpace, a: Evaluation, b: Evaluation) -> float:
     """Euclidean distance of the genes, divided by sqrt(n) so that it is 1 across the whole box."""
     difference = space.genes(a.params) - space.genes(b.params)
     return float(np.linalg.norm(difference) / math.sqrt(max(space.n_genes, 1)))
 
 
 def distinct(
-    ordered: Sequence[Evaluation], space: ParameterSpace, min_distance: float = DEFAULT_MIN_DISTANCE
+    ordered: Sequence[Evaluation],
+    space: ParameterSpace,
+    min_distance: float = DEFAULT_MIN_DISTANCE,
+    limit: int | None = None,
 ) -> list[Evaluation]:
     """The sets of ``ordered``, best first, that lie at least ``min_distance`` from every set
-    kept before them: one set per region, so a list of alternatives does not repeat one set."""
+    kept before them (the first ``limit``): one set per region, so a list of alternatives does
+    not repeat one set."""
     listed: list[Evaluation] = []
     for candidate in ordered:
-        if all(_distance(space, candidate, kept) >= min_distance for kept in listed):
+        if limit is not None and len(listed) >= limit:
+            break
+        if all(gene_distance(space, candidate, kept) >= min_distance for kept in listed):
             listed.append(candidate)
     return listed
 

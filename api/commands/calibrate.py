@@ -476,7 +476,8 @@ def _validation_table(console, summary: dict) -> None:
     if pooled:
         console.print(
             "pooled W1: each candidate's search runs pooled with its neighbours' (ga.match_estimate), "
-            "which chose the candidates; * within the experiment's noise floor."
+            "which chose the candidates; * within the experiment's noise floor (several experiments: "
+            "the largest W1 / floor)."
         )
     status = summary["validation_status"]
     chosen = summary.get("chosen_by") or ("the fastest validated set" if status == "validated" else "")

@@ -170,6 +170,7 @@ def test_a_search_ranked_on_pooled_neighbours_validates_what_the_estimate_calls_
 
     assert [region_of[ev.individual] for ev in checked] == ["A", "C", "B"]
     assert checked[0].f1 > definition.match_tolerance()  # its own run does not match
+    assert checked[0].individual == 0  # the region's fastest set stands for it
     first = checked[0].individual
     assert pooled[first][1] <= 0 < pooled[checked[1].individual][1] < pooled[checked[2].individual][1]
     assert pooled[first][0] == pytest.approx(0.2, abs=0.05)
@@ -250,3 +251,39 @@ def test_a_pooled_match_whose_neighbours_often_fail_is_no_candidate():
     assert min(pooled[i].violation for i in d_sets) <= 0  # D's measured runs alone would match
     assert min(pooled[i].failed_share for i in d_sets) > 0.2
     assert [region_of[ev.individual] for ev in checked] == ["A", "C", "B"]
+
+
+def test_a_pooled_study_without_validation_seeds_recommends_its_fastest_match_as_before():
+    definition, space, evaluations, ranking, region_of = _paper_search("neighbours")
+    definition = definition.model_copy(
+        update={"validation": definition.validation.model_copy(update={"seeds": 0})}
+    )
+
+    _, recommendation, _ = recommend(evaluations, [], definition, space, final=True)
+
+    assert recommendation["individual"] == ranking.recommendation.individual
+    assert recommendation["validation_status"] == "not validated" and recommendation["validation"] == []
+    assert recommendation["chosen_by"] == "the fastest match of the search, not validated"
+
+
+def test_when_nothing_reproduces_the_search_fastest_match_stays_recommended():
+    jams = [n + 9 for n in PAPER]
+
+    recommendation, verdict, _, _ = _validate({"A": jams, "C": jams, "B": jams})
+
+    assert recommendation["validation_status"] == NOT_REPRODUCED
+    assert recommendation["individual"] == 15  # B's 4, the fastest own-run match
+    assert recommendation["chosen_by"].endswith("; the fastest match of the search")
+    assert verdict.startswith("no candidate reproduced") and verdict.endswith("individual 15")
+
+
+def test_a_stored_validation_batch_keeps_its_sets_when_the_rule_that_chose_them_changed():
+    """A batch stored by the own-run rule (B's lucky 4 alone), completed by the pooled rule: the
+    rows are the sets that ran, not the ones the rule would choose now."""
+    definition, space, evaluations, ranking, region_of = _paper_search("neighbours")
+    records = _fresh(15, PAPER, definition.validation_batch())
+
+    _, recommendation, _ = recommend(evaluations, records, definition, space, final=True)
+
+    assert [row["individual"] for row in recommendation["validation"]] == [15]
+    assert recommendation["validation"][0]["verdict"] == VALIDATED

@@ -213,8 +213,9 @@ const INTRO = {
 // How the driver chose the recommendation after the validation (optimizer/driver.py _chosen_by);
 // studies stored before it said so read INTRO.
 function chosenBy(rec) {
-  if (rec.validation_status !== "validated" || !rec.chosen_by) return "";
-  return `${rec.chosen_by[0].toUpperCase()}${rec.chosen_by.slice(1)} (fresh seeds, table below):`;
+  if (!rec.chosen_by) return "";
+  const text = `${rec.chosen_by[0].toUpperCase()}${rec.chosen_by.slice(1)}`;
+  return rec.validation_status === "validated" ? `${text} (fresh seeds, table below):` : `${text}:`;
 }
 
 // A polled view's JSON, whether the server said it is of the study's current version, and for a
