@@ -142,3 +142,34 @@ def test_a_survivor_whose_extra_replicate_failed_keeps_its_own_violation():
     row = np.flatnonzero(np.all(pop.get("X") == survivor[0], axis=1))[0]
     assert pop.get("G")[row, 1] == 1.0 and pop.get("CV")[row, 0] > 0
     assert tuple(survivor[0]) not in search.estimate.history
+
+
+def test_the_validation_reads_the_pooled_estimate_the_ga_ranked_with():
+    """``pooled_evidence`` rebuilds the estimate from the stored runs; after the last generation
+    it must read each measured set as the GA's own estimate, kept in its saved state, does."""
+    from optimizer.driver import Driver
+    from optimizer.ga import from_bytes
+    from optimizer.memory import MemoryStore, SyntheticExecutor
+    from optimizer.neighbours import pooled_evidence
+    from optimizer.objectives import evaluate
+    from optimizer.space import ParameterSpace
+    from tests.optimizer.conftest import make_definition
+
+    definition = make_definition(
+        ga={"population": 10, "offspring": 5, "generations": 3, "match_estimate": "neighbours"},
+        validation={"seeds": 0},
+    )
+    store = MemoryStore()
+    study_id = store.create_study(definition.model_dump(mode="json"), None)
+    Driver(store, SyntheticExecutor()).run_to_completion(study_id, poll_timeout=0)
+    records = store.trials(study_id)
+    evaluations = [ev for ev in evaluate(records, definition, definition.n_items()) if ev.ok]
+    space = ParameterSpace(definition.parameters)
+
+    pooled = pooled_evidence(evaluations, definition, space)
+    estimate = from_bytes(store.load_study(study_id).ga_state).estimate
+    w1, violation = estimate.distances(np.array([space.genes(ev.params) for ev in evaluations]))
+
+    assert len(evaluations) >= 15
+    assert [pooled[ev.individual].w1 for ev in evaluations] == pytest.approx(list(w1), abs=1e-9)
+    assert [pooled[ev.individual].violation for ev in evaluations] == pytest.approx(list(violation), abs=1e-9)
