@@ -50,11 +50,15 @@ from dem.convex import at_point, place_body
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.materials import L_KT, L_MU, L_ZETA
 from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS, N_WALKS
-from dem.rounded_contact import WallFacet, box_extent, facet_geometry, pair_geometry
+from dem.rounded_contact import WallFacet, box_extent, facet_axis_clears, facet_geometry, pair_geometry
 
 # A piece's box clears a partner only by more than the rounding times this: the box and the
 # core's vertices are placed by different sums, which may differ in the last bits.
 BOX_SLACK = 1.0 + 1e-9
+# A piece-facet pair's cached direction clears it only by more than the rounding times this:
+# beyond the sums' last bits, the crowned distance the geometry would have found can lie below
+# the cores' distance by the crown's rounding slack (2e-9 of its tolerance, under 1e-9 r).
+FACET_AXIS_SLACK = 1.0 + 1e-6
 
 
 @numba.njit(**JIT_FLAGS)
@@ -501,36 +505,66 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat):
     if not apart and spheres.core_count[i] > 0:
         b = sbody[i]
         core = place_body(spheres.core_start[i], spheres.core_count[i], bodies.rot, pos, b)
-        normal = facets.normal
-        facet = WallFacet(
-            facets.tri_start[f],
-            facets.tri_count[f],
-            (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
-            (normal[f, 0], normal[f, 1], normal[f, 2]),
-            facets.offset[f],
-        )
-        delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face = facet_geometry(
-            spheres.core,
-            core,
-            spheres.rounding[i],
-            _crown(spheres.crown, i),
-            tri_flat,
-            facet,
-            spheres.work,
-        )
-        if delta > 0.0:
-            if dist == 0.0 or delta > lim * spheres.rounding[i]:
-                return False, b
-            wp_delta[p] = delta
-            wp_n[p, 0], wp_n[p, 1], wp_n[p, 2] = nx, ny, nz
-            # The patch centre on the facet (the mid-plane point moved back by d / 2).
-            wp_cp[p, 0] = cx - 0.5 * dist * nx
-            wp_cp[p, 1] = cy - 0.5 * dist * ny
-            wp_cp[p, 2] = cz - 0.5 * dist * nz
-            wall_pairs.moment[p, 0], wall_pairs.moment[p, 1], wall_pairs.moment[p, 2] = s_uu, s_uw, s_ww
-            wp_keep[p] = is_face
-            return True, -1
-        apart = True
+        # The pair's cached direction (the facet's closest points to the core when its triangles
+        # were last taken one by one, ``facet_geometry``): the piece's box, then its core, further
+        # from the facet's vertices along it than the rounding means the pair is apart, the
+        # answer the geometry would give (the crowned distance is at least the cores' distance),
+        # without the triangles' GJK queries: a piece over a facet's boundary or beyond a wall's
+        # end in the shaking. A pair that touched at the last step (its spring set) would not
+        # pass; it skips the test.
+        sx, sy, sz = wall_pairs.axis[p, 0], wall_pairs.axis[p, 1], wall_pairs.axis[p, 2]
+        if (sx != 0.0 or sy != 0.0 or sz != 0.0) and (
+            wp_hist[p, 0] == 0.0 and wp_hist[p, 1] == 0.0 and wp_hist[p, 2] == 0.0
+        ):
+            apart = facet_axis_clears(
+                x,
+                spheres.half,
+                bodies.rot,
+                i,
+                b,
+                spheres.core,
+                core,
+                spheres.rounding[i] * FACET_AXIS_SLACK,
+                tri_flat,
+                facets.tri_start[f],
+                facets.tri_count[f],
+                (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
+                sx,
+                sy,
+                sz,
+            )
+        if not apart:
+            normal = facets.normal
+            facet = WallFacet(
+                facets.tri_start[f],
+                facets.tri_count[f],
+                (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
+                (normal[f, 0], normal[f, 1], normal[f, 2]),
+                facets.offset[f],
+            )
+            delta, dist, nx, ny, nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face = facet_geometry(
+                spheres.core,
+                core,
+                spheres.rounding[i],
+                _crown(spheres.crown, i),
+                tri_flat,
+                facet,
+                spheres.work,
+                wall_pairs.axis[p],
+            )
+            if delta > 0.0:
+                if dist == 0.0 or delta > lim * spheres.rounding[i]:
+                    return False, b
+                wp_delta[p] = delta
+                wp_n[p, 0], wp_n[p, 1], wp_n[p, 2] = nx, ny, nz
+                # The patch centre on the facet (the mid-plane point moved back by d / 2).
+                wp_cp[p, 0] = cx - 0.5 * dist * nx
+                wp_cp[p, 1] = cy - 0.5 * dist * ny
+                wp_cp[p, 2] = cz - 0.5 * dist * nz
+                wall_pairs.moment[p, 0], wall_pairs.moment[p, 1], wall_pairs.moment[p, 2] = s_uu, s_uw, s_ww
+                wp_keep[p] = is_face
+                return True, -1
+            apart = True
     if not apart:
         d2, cx, cy, cz, is_face = closest_point_on_facet(
             x[i, 0], x[i, 1], x[i, 2], facets, f, wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]

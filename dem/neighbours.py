@@ -108,6 +108,7 @@ class WallPairs(NamedTuple):
     touching: np.ndarray  # (capacity,) int32 scratch of the force pass: the touching pairs, in order
     walk: np.ndarray  # (capacity + 1, 2) int32 first and end pair of a body's run of several spheres; (n, n)
     gap: np.ndarray  # (capacity,) in such a run: each pair's gap at the build
+    axis: np.ndarray  # (capacity, 3) rounded pieces: cached direction facet -> piece (any is valid; 0: none)
 
 
 class Neighbours(NamedTuple):
@@ -222,6 +223,7 @@ def _wall_pairs(capacity: int, old: WallPairs | None) -> WallPairs:
         np.zeros(capacity, dtype=_INDEX),
         np.zeros((capacity + 1, 2), dtype=_INDEX),
         np.zeros(capacity),
+        np.zeros((capacity, 3)),
     )
 
 

@@ -92,6 +92,31 @@ def box_extent(x, half, rot, i, b, nx, ny, nz):
     return c - e, c + e
 
 
+@numba.njit(inline="always", **JIT_FLAGS)
+def facet_high(tri, start, count, disp, nx, ny, nz):
+    """Highest projection on n of a facet's triangles ``start .. start + count`` of the triangle
+    array (three vertex rows each) moved by ``disp`` (3-tuple): its support along n."""
+    high = -np.inf
+    for v in range(3 * start, 3 * (start + count)):
+        high = max(high, (tri[v, 0] + disp[0]) * nx + (tri[v, 1] + disp[1]) * ny + (tri[v, 2] + disp[2]) * nz)
+    return high
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def facet_axis_clears(x, half, rot, i, b, va, a, reach, tri, start, count, disp, sx, sy, sz):
+    """Whether the unit direction s (facet -> piece; any direction) shows the core ``a`` of sphere
+    row i (body b; its box ``x[i]``, ``half[i]``, as ``box_extent``) further than ``reach`` from
+    the facet's triangles ``start .. start + count`` moved by ``disp``: the piece's box first
+    (three dot products), then its core's lowest vertex along s (one support query). A lower
+    bound of their distance, so a pair it clears by the rounding is apart."""
+    high = facet_high(tri, start, count, disp, sx, sy, sz)
+    low, _ = box_extent(x, half, rot, i, b, sx, sy, sz)
+    if low - high > reach:
+        return True
+    lx, ly, lz = support(va, a, -sx, -sy, -sz)
+    return lx * sx + ly * sy + lz * sz - high > reach
+
+
 @numba.njit(**STEP_FLAGS)
 def _triangle(facet, t):
     """Triangle t of the wall triangle array as a placed core."""
@@ -350,13 +375,17 @@ def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, w
 
 
 @numba.njit(**STEP_FLAGS)
-def facet_geometry(va, a, ra, crown_a, tri, facet, work):
+def facet_geometry(va, a, ra, crown_a, tri, facet, work, axis=None):
     """Contact of rounded shape A (core ``a`` of the vertex array va, rounding radius ``ra``,
     crown ``crown_a``) with a ``WallFacet`` of the triangle array ``tri``: ``(delta, d, nx, ny,
     nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face)``, delta the crowned overlap (the least crowned
     distance over the triangles, ``dem.crown``) and c its contact point. ``is_face``: the closest
     point of the facet is inside it (not on its boundary). When apart (delta <= 0), d may be a
     lower bound of the distance rather than the distance.
+
+    ``axis`` (3,), optional: where the triangles are taken one by one and the core's distance is
+    found, the unit direction of its closest points from the facet to the core is written there
+    (the caller's cached separating direction, ``dem.forces``); otherwise it is left as it is.
 
     Compiled without numba's runtime, as the callers: the usual cases (apart, or a piece over the
     inside of the facet) borrow their arrays without a reference count; the triangles one by one
@@ -374,13 +403,13 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work):
         box, m = _footprint(va, a, facet, ra + tol - (lo - offset - shift), work[6])
         if _inside_facet(tri, facet, box, work[6], m):
             return _plane_geometry(va, a, ra, crown_a, facet, box, lowest, work)
-    return _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work)
+    return _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work, axis)
 
 
 @numba.njit(**JIT_FLAGS)
-def _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work):
+def _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work, axis):
     """``facet_geometry`` over the facet's triangles one by one (the piece is not over its inside
-    or reaches below its plane)."""
+    or reaches below its plane); the closest points' direction to ``axis`` unless it is None."""
     disp, normal, offset = facet.disp, facet.normal, facet.offset
     t_start, t_count = facet.start, facet.count
     # Each triangle's distance and closest points, computed once for the three passes below. A
@@ -409,6 +438,8 @@ def _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work):
         gjk[k, 4], gjk[k, 5], gjk[k, 6] = wx, wy, wz
         if d < best:
             best, ax, ay, az, bx, by, bz = d, qx, qy, qz, wx, wy, wz
+    if axis is not None and 0.0 < best < np.inf:
+        axis[0], axis[1], axis[2] = (ax - bx) / best, (ay - by) / best, (az - bz) / best
     if best > bound:  # apart (the distance is at least the bound)
         return ra - bound, bound, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
     delta = ra - best

@@ -429,3 +429,59 @@ def test_clipping_passes_over_only_edges_that_keep_every_point():
         assert [tuple(row) for row in work[0, :n]] == expected
         passed_over += n == m and expected == [tuple(p) for p in poly]
     assert passed_over >= 20
+
+
+def test_a_facet_pair_cleared_along_any_direction_is_apart():
+    """``facet_axis_clears`` lets the force pass skip a piece-facet pair's geometry along its
+    cached direction (``dem.forces``): wherever it clears a pose by the rounding, the geometry must
+    find the pair apart. Poses of the smartphone around the end of a 1 m floor (the triangles one by
+    one), tried along the direction its geometry wrote at a nearby pose (the cache's use: many of
+    these clear) and along random directions; the floor moved, as a shaken wall is."""
+    from dem.bodies import Spheres
+    from dem.quaternion import matrices
+    from dem.rounded_contact import facet_axis_clears
+
+    phone = _smartphone()
+    f = floor()
+    tri = f.tri.reshape(-1, 3)
+    disp = (0.0, 0.002, 0.01)
+    facet = WallFacet(0, 2, disp, tuple(float(c) for c in f.normal[0]), float(f.offset[0]))
+    r = phone.rounding
+    crown = tuple(float(c) for c in phone.crown(0))
+    rng = np.random.default_rng(11)
+    work = scratch()
+    cleared_near = touching = 0
+    for trial in range(600):
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat)
+        rot = matrices(quat[None, :])[0]
+        # centres around the floor's edge x = 0.5, from beside it to over it, from below its
+        # plane to above
+        pos = np.array(
+            [0.5 + rng.uniform(-0.02, 0.1), rng.uniform(-0.3, 0.3), 0.01 + rng.uniform(-0.08, 0.08)]
+        )
+        core = place(0, len(phone.core), rot, pos)
+        axis = np.zeros(3)
+        facet_geometry(phone.core, core, r, crown, tri, facet, work, axis)
+        if trial % 2 == 0 or not axis.any():
+            axis = rng.normal(size=3)
+            axis /= np.linalg.norm(axis)
+            near = False
+        else:
+            near = True
+        # the pose a step later: moved by up to 0.1 r, turned by up to 0.01 rad
+        rot2 = matrices(np.append(1.0, rng.uniform(-0.005, 0.005, size=3))[None, :])[0] @ rot
+        pos2 = pos + rng.uniform(-0.1, 0.1, size=3) * r
+        spheres = Spheres()
+        spheres.append(0, phone, rot2, pos2)
+        rows = spheres.arrays()
+        core2 = place(0, len(phone.core), rot2, pos2)
+        delta = facet_geometry(phone.core, core2, r, crown, tri, facet, work)[0]
+        touching += delta > 0.0
+        clears = facet_axis_clears(
+            rows.x, rows.half, rot2[None], 0, 0, phone.core, core2, r, tri, 0, 2, disp, *axis
+        )
+        if clears:
+            assert delta <= 0.0, (trial, pos2, axis)
+            cleared_near += near
+    assert touching > 50 and cleared_near > 50
