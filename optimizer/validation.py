@@ -32,9 +32,9 @@ tolerance) accepted sets that are clearly off: the tolerance is the noise floor 
 ``replicates`` runs (3), looser than that of 8-10 fresh runs, and an interval's lower end
 loosens it again; with the quick study's experiment (median 5, up to 10) it validated 8 fresh
 runs of N_t 2-4, and 8 runs of which 5 emptied the tray.
-Otherwise ``not reproduced``. The recommendation becomes the fastest validated set (with pooled
-neighbours, first among those the pooled estimate calls a match: ``optimizer.driver._validated``);
-when none validates, the first candidate stays, labelled ``not reproduced``; a study without
+Otherwise ``not reproduced``. The recommendation becomes the fastest validated set
+(``optimizer.driver._validated``); when none validates, the search's fastest match stays,
+labelled ``not reproduced`` (with no own-run match, the first candidate); a study without
 validation (``validation.seeds = 0``) labels it ``not validated``. While the search runs, a
 study with validation seeds labels its current recommendation ``pending``: its check is to come;
 a study that ends before it (cancelled, failed) stores it as ``not validated`` (``settled``).
