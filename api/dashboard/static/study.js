@@ -246,7 +246,9 @@ function renderRecommendation(body) {
       else if (values !== undefined && values !== null) rows.push([`${label} (${unitOf(r)})`, fmt(values, 4)]);
     }
     if (rec.f1 !== undefined && rec.f1 !== null) {
-      rows.push([`f1 (${unitOf({ unit: study.f1_unit })})`, `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
+      // The search runs' f1: after the validation a candidate chosen on its pooled neighbours can lie
+      // outside the tolerance on its own runs; its fresh f1 is in the validation table.
+      rows.push([`f1 of its search runs (${unitOf({ unit: study.f1_unit })})`, `${fmt(rec.f1, 3)} ${interval(rec.f1_interval)}`.trim()]);
     }
     if (rec.replicates) rows.push(["replicates in the search", String(rec.replicates)]);
     // optimizer.pareto.summary: the set's f2 parts, of the whole protocol (mean over replicates).
