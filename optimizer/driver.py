@@ -604,8 +604,9 @@ def _validated(
     """The recommendation after the validation, with the table: the fastest validated set, as
     the paper asks (among the sets that match, the fastest). Preferring the validated sets the
     pooled estimate also calls feasible was tried (calibration 19): it chose the better set in
-    one study and a 3.3x slower one with a worse fresh W1 in another, because that estimate's
-    floor tightens without bound as runs pool, so it doubts exactly the well-sampled regions."""
+    one study and a 3.3x slower one with a worse fresh W1 in another: that estimate's floor then
+    tightened as runs pooled, so it doubted exactly the well-sampled regions (since mended in
+    ``optimizer/neighbours.py``)."""
     pooled = pooled_evidence(evaluations, definition, space)
     checked = _checked(ranking, evaluations, records, definition, space, pooled)
     if not checked:
