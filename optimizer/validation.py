@@ -32,7 +32,8 @@ tolerance) accepted sets that are clearly off: the tolerance is the noise floor 
 ``replicates`` runs (3), looser than that of 8-10 fresh runs, and an interval's lower end
 loosens it again; with the quick study's experiment (median 5, up to 10) it validated 8 fresh
 runs of N_t 2-4, and 8 runs of which 5 emptied the tray.
-Otherwise ``not reproduced``. The recommendation becomes the fastest validated set
+Otherwise ``not reproduced``. The recommendation becomes the fastest validated set, first
+among those whose fresh W1 is within the experiment's own noise floor
 (``optimizer.driver._validated``); when none validates, the search's fastest match stays,
 labelled ``not reproduced`` (with no own-run match, the first candidate); a study without
 validation (``validation.seeds = 0``) labels it ``not validated``. While the search runs, a

@@ -212,7 +212,9 @@ def test_the_recommendation_is_the_fastest_validated_candidate_not_the_first():
     assert [region_of[row["individual"]] for row in rows] == ["A", "C", "B"]
     assert [row["verdict"] for row in rows] == [VALIDATED, VALIDATED, NOT_REPRODUCED]
     assert recommendation["individual"] == checked["C"] and recommendation["validation_status"] == VALIDATED
-    assert recommendation["chosen_by"] == "the fastest validated parameter set"
+    assert recommendation["chosen_by"] == (
+        "the fastest validated parameter set whose fresh runs lie within the experiment's own noise"
+    )
     assert f"recommended individual {checked['C']}, validated" in verdict
     assert checked["A"] in {ev["individual"] for ev in recommendation["equivalent"]}
     assert rows[0]["search_pooled_violation"] <= 0 < rows[1]["search_pooled_violation"]
@@ -281,3 +283,17 @@ def test_a_stored_validation_batch_keeps_its_sets_when_the_rule_that_chose_them_
 
     assert [row["individual"] for row in recommendation["validation"]] == [15]
     assert recommendation["validation"][0]["verdict"] == VALIDATED
+
+
+def test_a_validated_set_as_close_as_a_repeat_of_the_experiment_beats_a_faster_one_that_only_passes():
+    """C is faster and passes the test with fresh runs 4 items above the experiment's (W1 4.0,
+    within the permutation limit but beyond the experiment's own floor, 3.1), A's fresh runs are
+    the experiment's: A is recommended."""
+    higher = [n + 4 for n in PAPER]
+
+    recommendation, _, checked, region_of = _validate({"A": PAPER, "C": higher, "B": [n + 9 for n in PAPER]})
+
+    rows = {region_of[row["individual"]]: row for row in recommendation["validation"]}
+    assert rows["C"]["verdict"] == VALIDATED and rows["C"]["w1"] == pytest.approx(4.0)
+    assert recommendation["individual"] == checked["A"]
+    assert recommendation["chosen_by"].endswith("within the experiment's own noise")
