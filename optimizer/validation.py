@@ -53,7 +53,7 @@ from scipy.stats import wasserstein_distance
 from optimizer.neighbours import PooledMatch
 from optimizer.noise import bootstrap_interval, median_many, permutation_quantile, wasserstein_pairs
 from optimizer.objectives import Evaluation, experiment_distance, match_distance, match_interval
-from optimizer.pareto import DEFAULT_MIN_DISTANCE, Ranking, distinct, gene_distance
+from optimizer.pareto import DEFAULT_MIN_DISTANCE, Ranking, gene_distance
 from optimizer.protocols import TrialRecord
 from optimizer.space import ParameterSpace
 from optimizer.study import NOISE_FLOOR_QUANTILE, Experiment, StudyDefinition, aggregate
@@ -114,17 +114,21 @@ def candidates(
         and pooled[ev.individual].failed_share <= MAX_FAILED_SHARE
     ]
     evidenced.sort(key=lambda ev: (pooled[ev.individual].violation, ev.f2, ev.individual))
-    regions = distinct(evidenced, space, limit=definition.validation.candidates)
-    # Within a region the violations differ by noise: its fastest set of the same kind stands for it.
+    # Within a region the violations differ by noise: its fastest set of the same kind stands
+    # for it, and every chosen set lies apart from the others (pareto.distinct's distance).
     chosen: list[Evaluation] = []
-    for region in regions:
-        feasible = pooled[region.individual].violation <= 0.0
+    for best in evidenced:
+        if len(chosen) == definition.validation.candidates:
+            break
+        if any(gene_distance(space, best, kept) < DEFAULT_MIN_DISTANCE for kept in chosen):
+            continue
+        feasible = pooled[best.individual].violation <= 0.0
         alike = [
             ev
             for ev in evidenced
-            if gene_distance(space, ev, region) < DEFAULT_MIN_DISTANCE
+            if gene_distance(space, ev, best) < DEFAULT_MIN_DISTANCE
             and (pooled[ev.individual].violation <= 0.0) == feasible
-            and all(ev.individual != kept.individual for kept in chosen)
+            and all(gene_distance(space, ev, kept) >= DEFAULT_MIN_DISTANCE for kept in chosen)
         ]
         chosen.append(min(alike, key=lambda ev: (ev.f2, ev.individual)))
     return chosen

@@ -297,3 +297,22 @@ def test_a_validated_set_as_close_as_a_repeat_of_the_experiment_beats_a_faster_o
     assert rows["C"]["verdict"] == VALIDATED and rows["C"]["w1"] == pytest.approx(4.0)
     assert recommendation["individual"] == checked["A"]
     assert recommendation["chosen_by"].endswith("within the experiment's own noise")
+
+
+def test_pooled_candidates_stand_for_distinct_regions_even_when_a_region_gives_way_to_its_fastest_set():
+    """X1 is the best evidence, X4 its fastest neighbour; X3 is a region of its own only as seen
+    from X1, and lies beside X4: it must not be validated as well (nor X2, beside X4 too)."""
+    from optimizer.neighbours import PooledMatch
+
+    definition, space, _, ranking, _ = _paper_search("neighbours")
+    base = space.genes({"E": 1e7, "nu": 0.2, "e": 0.3, "mu": 0.5})
+    sets = {1: (0.0, -1.0, 5.0), 2: (0.12, -0.9, 2.0), 3: (0.20, -0.8, 4.0), 4: (0.14, -0.5, 1.0)}
+    evaluations, pooled = [], {}
+    for individual, (shift, violation, f2) in sets.items():
+        params = space.params(base + np.array([0.0, 0.0, 0.0, shift]))
+        evaluations.append(Evaluation(individual, 0, params, 4.0, f2, [0], f2, f2, [f"t{individual}"]))
+        pooled[individual] = PooledMatch(1.0, violation, 0.0)
+
+    checked = candidates(ranking, evaluations, space, definition, pooled)
+
+    assert [ev.individual for ev in checked] == [4]
