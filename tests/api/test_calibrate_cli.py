@@ -326,26 +326,15 @@ def test_a_bad_scenario_in_a_study_file_exits_2_naming_the_field_of_its_kind(emb
 
 def test_a_validation_table_written_to_a_log_keeps_its_verdicts_whole(monkeypatch, capsys):
     """Piped or logged, rich drew 80 columns and the paper study's table read 'vali…'."""
-    from api.commands.calibrate import _validation_table
-    from api.commands.console import cli_console
-
-    monkeypatch.delenv("COLUMNS", raising=False)
     row = {
         "params": {"E": 9.67e6, "nu": 0.363, "e": 0.175, "mu": 0.914}, "search_f1": 0.0,
         "n_remaining": [0, 0, 10, 4, 9, 3, 1, 15, 16, 3], "failures": [], "median": 3.5,
         "median_interval": [1.5, 10.0], "w1": 0.8, "f1": 0.5, "f1_interval": [0.0, 6.0],
     }  # fmt: skip
-    summary = {
-        "measured": [0, 0, 1, 2, 3, 4, 4, 12, 15, 16], "responses_measured": "N_t",
-        "validation_status": "validated",
-        "validation": [
-            dict(row, individual=77, verdict="validated"),
-            dict(row, individual=152, verdict="not reproduced", failures=["unstable"]),
-        ],
-    }  # fmt: skip
-
-    _validation_table(cli_console(), summary)
-    output = capsys.readouterr().out
+    output = _printed_validation_table(monkeypatch, capsys, [
+        dict(row, individual=77, verdict="validated"),
+        dict(row, individual=152, verdict="not reproduced", failures=["unstable"]),
+    ])  # fmt: skip
 
     assert "…" not in output
     assert "validated" in output and "not reproduced" in output and "+1 failed" in output
@@ -356,28 +345,31 @@ def test_a_validation_table_of_a_pooled_search_shows_the_pooled_w1_its_candidate
     monkeypatch, capsys
 ):
     """Calibration 18's #76: own run 9 (search f1 5), pooled W1 2.89 within the floor (starred)."""
-    from api.commands.calibrate import _validation_table
-    from api.commands.console import cli_console
-
-    monkeypatch.delenv("COLUMNS", raising=False)
     row = {
         "params": {"E": 1.67e8, "nu": 0.44, "e": 0.22, "mu": 0.84}, "search_f1": 5.0,
         "search_pooled_w1": 2.89, "search_pooled_violation": -0.21,
         "n_remaining": [6, 4, 0, 0, 0, 11, 0, 13, 7, 3], "failures": [], "median": 3.5,
         "median_interval": [0.0, 7.0], "w1": 1.7, "f1": 0.5, "f1_interval": [0.0, 4.0],
     }  # fmt: skip
-    summary = {
-        "measured": [0, 0, 1, 2, 3, 4, 4, 12, 15, 16], "responses_measured": "N_t",
-        "validation_status": "validated",
-        "validation": [
-            dict(row, individual=76, verdict="validated"),
-            dict(row, individual=178, verdict="validated", search_f1=0.0, search_pooled_w1=1.43,
-                 search_pooled_violation=0.09),
-        ],
-    }  # fmt: skip
-
-    _validation_table(cli_console(), summary)
-    output = capsys.readouterr().out
+    output = _printed_validation_table(monkeypatch, capsys, [
+        dict(row, individual=76, verdict="validated"),
+        dict(row, individual=178, verdict="validated", search_f1=0.0, search_pooled_w1=1.43,
+             search_pooled_violation=0.09),
+    ])  # fmt: skip
 
     assert "pooled W1" in output and "2.89*" in output and "1.43 " in output and "1.43*" not in output
     assert "Recommendation: validated (the fastest validated set)." in output
+
+
+def _printed_validation_table(monkeypatch, capsys, rows: list[dict]) -> str:
+    """The CLI's validation table of a validated study with ``rows``, as a log would keep it."""
+    from api.commands.calibrate import _validation_table
+    from api.commands.console import cli_console
+
+    monkeypatch.delenv("COLUMNS", raising=False)
+    summary = {
+        "measured": [0, 0, 1, 2, 3, 4, 4, 12, 15, 16], "responses_measured": "N_t",
+        "validation_status": "validated", "validation": rows,
+    }  # fmt: skip
+    _validation_table(cli_console(), summary)
+    return capsys.readouterr().out
