@@ -59,18 +59,12 @@ def gene_distance(space: ParameterSpace, a: Evaluation, b: Evaluation) -> float:
 
 
 def distinct(
-    ordered: Sequence[Evaluation],
-    space: ParameterSpace,
-    min_distance: float = DEFAULT_MIN_DISTANCE,
-    limit: int | None = None,
+    ordered: Sequence[Evaluation], space: ParameterSpace, min_distance: float = DEFAULT_MIN_DISTANCE
 ) -> list[Evaluation]:
     """The sets of ``ordered``, best first, that lie at least ``min_distance`` from every set
-    kept before them (the first ``limit``): one set per region, so a list of alternatives does
-    not repeat one set."""
+    kept before them: one set per region, so a list of alternatives does not repeat one set."""
     listed: list[Evaluation] = []
     for candidate in ordered:
-        if limit is not None and len(listed) >= limit:
-            break
         if all(gene_distance(space, candidate, kept) >= min_distance for kept in listed):
             listed.append(candidate)
     return listed
