@@ -18,7 +18,7 @@ This module ranks what it is given; it must not read stores or decide when a stu
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,14 +59,38 @@ def gene_distance(space: ParameterSpace, a: Evaluation, b: Evaluation) -> float:
 
 
 def distinct(
-    ordered: Sequence[Evaluation], space: ParameterSpace, min_distance: float = DEFAULT_MIN_DISTANCE
+    ordered: Sequence[Evaluation],
+    space: ParameterSpace,
+    min_distance: float = DEFAULT_MIN_DISTANCE,
+    *,
+    stand_in: Callable[[Evaluation, list[Evaluation]], Evaluation] | None = None,
+    limit: int | None = None,
 ) -> list[Evaluation]:
-    """The sets of ``ordered``, best first, that lie at least ``min_distance`` from every set
-    kept before them: one set per region, so a list of alternatives does not repeat one set."""
+    """One set per region of parameter space, so that a list of alternatives does not repeat one
+    set: walking ``ordered``, best first, a set at least ``min_distance`` (``gene_distance``)
+    from every set listed so far opens a region, any other is passed over. The region is listed
+    as ``stand_in(first, region)`` (by default its first set): ``region`` holds the sets of
+    ``ordered`` within ``min_distance`` of the first, ``ordered``'s order kept, and only those
+    at least that far from every set listed before, so the listed sets lie apart from each other
+    whichever of them stands in. The first ``limit`` regions at most (all by default). Both the
+    equivalent sets (``rank``) and the validation's candidates (``optimizer.validation``) walk
+    their sets so."""
     listed: list[Evaluation] = []
-    for candidate in ordered:
-        if all(gene_distance(space, candidate, kept) >= min_distance for kept in listed):
-            listed.append(candidate)
+    for first in ordered:
+        if limit is not None and len(listed) == limit:
+            break
+        if not all(gene_distance(space, first, kept) >= min_distance for kept in listed):
+            continue
+        if stand_in is None:
+            listed.append(first)
+            continue
+        region = [
+            evaluation
+            for evaluation in ordered
+            if gene_distance(space, evaluation, first) < min_distance
+            and all(gene_distance(space, evaluation, kept) >= min_distance for kept in listed)
+        ]
+        listed.append(stand_in(first, region))
     return listed
 
 

@@ -53,7 +53,7 @@ from scipy.stats import wasserstein_distance
 from optimizer.neighbours import PooledMatch
 from optimizer.noise import bootstrap_interval, median_many, permutation_quantile, wasserstein_pairs
 from optimizer.objectives import Evaluation, experiment_distance, match_distance, match_interval
-from optimizer.pareto import DEFAULT_MIN_DISTANCE, Ranking, gene_distance
+from optimizer.pareto import Ranking, distinct
 from optimizer.protocols import TrialRecord
 from optimizer.space import ParameterSpace
 from optimizer.study import NOISE_FLOOR_QUANTILE, Experiment, StudyDefinition, aggregate
@@ -87,13 +87,13 @@ def candidates(
     - A GA that ranks on the pooled neighbours' estimate (``pooled``,
       ``optimizer.neighbours.pooled_evidence``): the sets that estimate calls feasible and the
       own-run matches, least pooled violation first (so the feasible ones first), one a region of
-      parameter space (its fastest set of the same kind, feasible or not: within a region the
-      violations differ by noise). Why: with one run a set, an own-run match is mostly a lucky
-      draw, and the estimate, which pools many draws, ranks the sets as fresh runs do. In the
-      paper's study (benchmarks/README.md, calibration 18) the three own-run candidates all
-      matched on N_t = 4 and gave fresh medians 8, 14.5 and 13 against the experiment's 3.5,
-      while the one set the estimate called feasible (its own run 9, never a candidate) gave 3.5,
-      W1 1.70, on the same fresh seeds. Ordered by the evidence, not by speed: the few
+      parameter space (``pareto.distinct``: its fastest set of the same kind, feasible or not:
+      within a region the violations differ by noise). Why: with one run a set, an own-run match
+      is mostly a lucky draw, and the estimate, which pools many draws, ranks the sets as fresh
+      runs do. In the paper's study (benchmarks/README.md, calibration 18) the three own-run
+      candidates all matched on N_t = 4 and gave fresh medians 8, 14.5 and 13 against the
+      experiment's 3.5, while the one set the estimate called feasible (its own run 9, never a
+      candidate) gave 3.5, W1 1.70, on the same fresh seeds. Ordered by the evidence, not by speed: the few
       candidates go to the sets likeliest to validate, and the recommendation is then the
       fastest of those that do.
     - Among those, a set whose neighbours' runs fail in more than ``MAX_FAILED_SHARE`` of them is
@@ -114,24 +114,15 @@ def candidates(
         and pooled[ev.individual].failed_share <= MAX_FAILED_SHARE
     ]
     evidenced.sort(key=lambda ev: (pooled[ev.individual].violation, ev.f2, ev.individual))
-    # Within a region the violations differ by noise: its fastest set of the same kind stands
-    # for it, and every chosen set lies apart from the others (pareto.distinct's distance).
-    chosen: list[Evaluation] = []
-    for best in evidenced:
-        if len(chosen) == definition.validation.candidates:
-            break
-        if any(gene_distance(space, best, kept) < DEFAULT_MIN_DISTANCE for kept in chosen):
-            continue
-        feasible = pooled[best.individual].violation <= 0.0
-        alike = [
-            ev
-            for ev in evidenced
-            if gene_distance(space, ev, best) < DEFAULT_MIN_DISTANCE
-            and (pooled[ev.individual].violation <= 0.0) == feasible
-            and all(gene_distance(space, ev, kept) >= DEFAULT_MIN_DISTANCE for kept in chosen)
-        ]
-        chosen.append(min(alike, key=lambda ev: (ev.f2, ev.individual)))
-    return chosen
+
+    def feasible(evaluation: Evaluation) -> bool:
+        return pooled[evaluation.individual].violation <= 0.0
+
+    def fastest_alike(first: Evaluation, region: list[Evaluation]) -> Evaluation:
+        alike = [evaluation for evaluation in region if feasible(evaluation) == feasible(first)]
+        return min(alike, key=lambda ev: (ev.f2, ev.individual))
+
+    return distinct(evidenced, space, stand_in=fastest_alike, limit=definition.validation.candidates)
 
 
 def reproduction_test(fresh: Sequence[float], experiment: Experiment, seed: int) -> dict:

@@ -316,3 +316,53 @@ def test_pooled_candidates_stand_for_distinct_regions_even_when_a_region_gives_w
     checked = candidates(ranking, evaluations, space, definition, pooled)
 
     assert [ev.individual for ev in checked] == [4]
+
+
+def _candidates_of(
+    sets: dict[int, tuple[float, float, float]], n_candidates: int = 3, own_match: int | None = None
+):
+    """The pooled candidates among sets given as individual -> (mu shift in genes, pooled
+    violation, f2), all else equal: the gene distance of two sets is half their shifts' difference.
+    ``own_match``: the set whose own runs matched (the search's recommendation)."""
+    from optimizer.neighbours import PooledMatch
+    from optimizer.pareto import Ranking
+
+    definition = make_definition(
+        replicates=1,
+        experiment={"measured": PAPER},
+        ga={"match_estimate": "neighbours"},
+        validation={"candidates": n_candidates},
+    )
+    space = ParameterSpace(definition.parameters)
+    base = space.genes({"E": 1e7, "nu": 0.2, "e": 0.3, "mu": 0.3})
+    evaluations, pooled = [], {}
+    for individual, (shift, violation, f2) in sets.items():
+        params = space.params(base + np.array([0.0, 0.0, 0.0, shift]))
+        evaluations.append(Evaluation(individual, 0, params, 4.0, f2, [0], f2, f2, [f"t{individual}"]))
+        pooled[individual] = PooledMatch(1.0, violation, 0.0)
+    by_individual = {ev.individual: ev for ev in evaluations}
+    recommendation = None if own_match is None else by_individual[own_match]
+    ranking = Ranking(pareto=[], recommendation=recommendation, equivalent=[], best_f1=None)
+    return [ev.individual for ev in candidates(ranking, evaluations, space, definition, pooled)]
+
+
+def test_a_pooled_region_is_stood_for_by_its_fastest_set_of_the_same_kind():
+    """1 is the best evidence; 3, beside it and faster, is feasible too and stands for the region;
+    2, faster still, is an own-run match the estimate calls infeasible: of the other kind."""
+    sets = {1: (0.0, -1.0, 5.0), 2: (0.04, 0.5, 1.0), 3: (0.06, -0.2, 3.0)}
+
+    assert _candidates_of(sets, own_match=2) == [3]
+
+
+def test_pooled_candidates_are_as_many_regions_as_the_study_validates():
+    sets = {1: (0.0, -1.0, 1.0), 2: (0.4, -0.5, 1.0), 3: (0.8, -0.2, 1.0)}
+
+    assert _candidates_of(sets, n_candidates=2) == [1, 2]
+
+
+def test_a_region_is_not_stood_for_by_a_set_beside_a_candidate_already_chosen():
+    """2 opens a region 0.12 from 1; 3 is faster and 0.05 from 2, but 0.07 from 1: it would
+    validate 1's region twice, so 2 stands for its own."""
+    sets = {1: (0.0, -1.0, 1.0), 2: (0.24, -0.9, 5.0), 3: (0.14, -0.5, 2.0)}
+
+    assert _candidates_of(sets) == [1, 2]
