@@ -617,7 +617,8 @@ def _validated(
         return None, _verdict(ranking)
     rows = validation.table(checked, records, definition, pooled) if definition.validation.seeds else []
     validated = [i for i, row in enumerate(rows) if row["verdict"] == validation.VALIDATED]
-    close = [_as_close_as_a_repeat(row, definition) for row in rows]
+    floors = {x.response: x.noise_floor(len(x.measured)) for x in definition.experiments}
+    close = [_as_close_as_a_repeat(row, floors) for row in rows]
     chosen = min(validated, key=lambda i: (not close[i], checked[i].f2, i)) if validated else None
     status = (
         validation.VALIDATED
@@ -674,10 +675,10 @@ def _checked(
     return kept + [by_individual[i] for i in missed if i in by_individual]
 
 
-def _as_close_as_a_repeat(row: dict, definition: StudyDefinition) -> bool:
+def _as_close_as_a_repeat(row: dict, floors: dict[str, float]) -> bool:
     """Whether a validation row's fresh W1 to every experiment is within that experiment's own
-    noise floor (``Experiment.noise_floor`` for its own number of values)."""
-    floors = {x.response: x.noise_floor(len(x.measured)) for x in definition.experiments}
+    noise floor: ``floors``, by response, ``Experiment.noise_floor`` for its own number of values
+    (the caller computes them once for all rows)."""
     tests = row["reproduction"]
     return bool(tests) and all(test["value"] <= floors[test["response"]] + 1e-9 for test in tests)
 

@@ -13,6 +13,7 @@ from optimizer.objectives import Evaluation
 from optimizer.pareto import rank
 from optimizer.protocols import TrialRecord, TrialSpec, TrialState
 from optimizer.space import ParameterSpace
+from optimizer.study import StudyDefinition
 from optimizer.validation import NOT_REPRODUCED, VALIDATED, candidates, check
 from tests.optimizer.conftest import make_definition
 
@@ -366,3 +367,44 @@ def test_a_region_is_not_stood_for_by_a_set_beside_a_candidate_already_chosen():
     sets = {1: (0.0, -1.0, 1.0), 2: (0.24, -0.9, 5.0), 3: (0.14, -0.5, 2.0)}
 
     assert _candidates_of(sets) == [1, 2]
+
+
+def test_a_set_as_close_as_a_repeat_is_within_each_experiments_own_floor():
+    """Two experiments, the feeder's N_t (own floor 3.1 items) and a heap's angle (1.4 degrees):
+    the faster set's fresh angles lie 2 degrees above the heap's, which passes the test (limit
+    2.3) and the feeder's floor but not the heap's own: the slower set, a repeat of both, wins."""
+    angles = [28.0, 29.5, 30.0, 31.0, 31.5, 32.0, 33.0, 34.5, 35.0, 37.0]
+    definition = StudyDefinition.model_validate(
+        {
+            "scenario": {"kind": "combined", "parts": {"heap": {"kind": "angle_of_repose"}, "feeder": {}}},
+            "replicates": 1,
+            "experiments": [
+                {"response": "feeder.n_remaining", "measured": PAPER},
+                {"response": "heap.angle_deg", "measured": angles},
+            ],
+        }
+    )
+    space = ParameterSpace(definition.parameters)
+    fast = ({"E": 1e7, "nu": 0.3, "e": 0.3, "mu": 0.3}, 1.0)
+    slow = ({"E": 1e8, "nu": 0.3, "e": 0.7, "mu": 0.8}, 5.0)
+    evaluations = [
+        Evaluation(i, 0, params, 0.0, f2, [4], f2, f2, [f"t{i}"], responses={"feeder.n_remaining": [4]})
+        for i, (params, f2) in enumerate([fast, slow])
+    ]
+    batch = definition.validation_batch()
+    records = []
+    for individual, shift in [(0, 2.0), (1, 0.0)]:
+        for k, (n, angle) in enumerate(zip(PAPER, angles, strict=True)):
+            spec = TrialSpec(f"s-{individual}-{k}", "s", individual, batch, 100 + k, 9000 + k, {}, {})
+            responses = {"feeder.n_remaining": n, "heap.angle_deg": angle + shift}
+            result = SimulationResult(status=SimulationStatus.OK, n_items=30, responses=responses, cost=1.0)
+            records.append(TrialRecord(spec, TrialState.DONE, result))
+
+    _, recommendation, _ = recommend(evaluations, records, definition, space, final=True)
+
+    rows = recommendation["validation"]
+    assert [row["verdict"] for row in rows] == [VALIDATED, VALIDATED]
+    assert [test["value"] for test in rows[0]["reproduction"]] == pytest.approx([0.0, 2.0])
+    feeder_floor, heap_floor = (x.noise_floor(len(x.measured)) for x in definition.experiments)
+    assert heap_floor < 2.0 < feeder_floor
+    assert recommendation["individual"] == 1
