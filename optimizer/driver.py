@@ -53,7 +53,7 @@ from pydantic import ValidationError
 from dem.result import SimulationStatus
 from optimizer import validation
 from optimizer.ga import Search, create_search, from_bytes, to_bytes
-from optimizer.neighbours import pooled_evidence
+from optimizer.neighbours import PooledMatch, pooled_evidence
 from optimizer.objectives import Evaluation, evaluate, match_rule, observation
 from optimizer.outcomes import shown_objectives
 from optimizer.pareto import Ranking, rank, recommendation_json, summary
@@ -110,6 +110,10 @@ class _Batch:
     individuals: list[int]
     genes: np.ndarray | None  # the GA's genes in ``individuals`` order; None for re-evaluation
     search: Search | None
+    # The validation batch's ``pooled_evidence``, which chose its candidates, kept for its rows:
+    # the search's runs do not change while the batch runs. None when not computed (a batch read
+    # back from the store) or when the search ranks on own runs.
+    pooled: dict[int, PooledMatch] | None = None
 
 
 @dataclass(frozen=True)
@@ -418,7 +422,7 @@ class Driver:
         logger.info(
             "study %s: validating %d sets on %d fresh seeds", study.study_id, len(checked), len(seeds)
         )
-        return _Batch(index, specs, [evaluation.individual for evaluation in checked], None, None)
+        return _Batch(index, specs, [evaluation.individual for evaluation in checked], None, None, pooled)
 
     def _complete(
         self, study: StudyRecord, context: _Study, batch: _Batch, records: list[TrialRecord]
@@ -443,7 +447,9 @@ class Driver:
                 )
             ga_state = to_bytes(batch.search)
         final = batch.index == definition.validation_batch()
-        ranking, recommendation, verdict = recommend(evaluations, records, definition, context.space, final)
+        ranking, recommendation, verdict = recommend(
+            evaluations, records, definition, context.space, final, batch.pooled
+        )
         pareto_ids = [tid for evaluation in ranking.pareto for tid in evaluation.trial_ids]
         # Shown objectives depend on an individual's own results only: those of this batch's.
         touched = {spec.individual for spec in batch.specs}
@@ -574,13 +580,16 @@ def recommend(
     definition: StudyDefinition,
     space: ParameterSpace,
     final: bool,
+    pooled: dict[int, PooledMatch] | None = None,
 ) -> tuple[Ranking, dict | None, str]:
     """What a study stores after a batch: the ranking, the recommendation (JSON, None when no set
     matches) and a one-line verdict for the log. ``final`` is the validation batch's: the
-    recommendation then carries the validation table (``optimizer/validation.py``)."""
+    recommendation then carries the validation table (``optimizer/validation.py``), with
+    ``pooled``, ``pooled_evidence`` of ``evaluations`` when the caller has it (computed here
+    otherwise)."""
     ranking = _ranking(evaluations, definition, space)
     if final:
-        return ranking, *_validated(ranking, evaluations, records, definition, space)
+        return ranking, *_validated(ranking, evaluations, records, definition, space, pooled)
     recommendation = recommendation_json(
         ranking, definition.experiment.target(), definition.match_tolerance(), definition.objective_time
     )
@@ -600,6 +609,7 @@ def _validated(
     records: list[TrialRecord],
     definition: StudyDefinition,
     space: ParameterSpace,
+    pooled: dict[int, PooledMatch] | None,
 ) -> tuple[dict | None, str]:
     """The recommendation after the validation, with the table: the fastest validated set whose
     fresh runs lie as close to every experiment as a repeat of it would (fresh W1 within the
@@ -611,7 +621,8 @@ def _validated(
     calibration 19). Preferring the sets the pooled estimate calls feasible was tried first: its
     floor then tightened as runs pooled (since mended in ``optimizer/neighbours.py``), and it
     chose a 3.3x slower set with a worse fresh W1."""
-    pooled = pooled_evidence(evaluations, definition, space)
+    if pooled is None:
+        pooled = pooled_evidence(evaluations, definition, space)
     checked = _checked(ranking, evaluations, records, definition, space, pooled)
     if not checked:
         return None, _verdict(ranking)

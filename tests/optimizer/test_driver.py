@@ -393,3 +393,44 @@ def test_validation_seeds_skip_a_seed_the_search_used():
 
     assert validation_seeds(7, 2, {clash}) == [trial_seed(7, k, VALIDATION_STREAM) for k in (1, 2)]
     assert validation_seeds(7, 2, set())[0] == clash
+
+
+@pytest.mark.parametrize("restarted", [False, True])
+def test_the_validation_rows_carry_the_pooled_evidence_its_candidates_were_chosen_on(monkeypatch, restarted):
+    """The driver computes ``pooled_evidence`` once, when it chooses the candidates, and the rows
+    carry that; a driver restarted while the fresh runs go computes it again from the store.
+    Either way the rows read what the whole search's runs say after it ended."""
+    import optimizer.driver as driver_module
+    from optimizer.neighbours import pooled_evidence
+    from optimizer.objectives import evaluate
+    from optimizer.space import ParameterSpace
+
+    definition = make_definition(
+        ga={"population": 8, "offspring": 4, "generations": 3, "match_estimate": "neighbours"},
+        validation={"seeds": 3, "candidates": 2},
+    )
+    store = MemoryStore()
+    study_id = start(store, definition)
+    calls = []
+    monkeypatch.setattr(
+        driver_module, "pooled_evidence", lambda *args: calls.append(1) or pooled_evidence(*args)
+    )
+    driver = Driver(store, SyntheticExecutor(per_poll=2))
+    while store.load_study(study_id).generation < definition.validation_batch():
+        driver.step(study_id, timeout=0)
+    driver.step(study_id, timeout=0)  # the validation batch: its candidates, sent
+    if restarted:
+        driver = Driver(store, SyntheticExecutor())
+
+    progress = driver.run_to_completion(study_id, poll_timeout=0)
+
+    space = ParameterSpace(definition.parameters)
+    evaluations = evaluate(store.trials(study_id), definition, definition.n_items())
+    expected = pooled_evidence(evaluations, definition, space)
+    rows = progress.recommendation["validation"]
+    assert progress.status is StudyStatus.DONE and rows
+    assert len(calls) == 1 + restarted
+    assert [
+        (row["search_pooled_w1"], row["search_pooled_violation"], row["search_pooled_failed_share"])
+        for row in rows
+    ] == [tuple(expected[row["individual"]]) for row in rows]
