@@ -229,6 +229,12 @@ class GenerationSummary(_Wire):
     responses: dict[str, Spread] = Field(default_factory=dict, description="Each response's spread.")
     wall_time_s: Spread | None
     cost: Spread | None
+    protocol_wall_time_s: Spread | None = Field(
+        None, description="The spread of the trials' protocol_wall_time_s (TrialRead): what f2 ranks."
+    )
+    protocol_cost: Spread | None = Field(
+        None, description="The spread of the trials' protocol_cost (TrialRead): what f2 ranks."
+    )
     best_f1: float | None
     w1_to_experiment: dict[str, float | None] = Field(
         default_factory=dict,

@@ -1,8 +1,9 @@
 """The per-generation summary (the paper's Fig. 5), in one place for the API's
 ``GET /studies/{id}/generations`` and the results folder's ``summary.json``: for each batch, its
 runs, how many finished, measured and failed (by status), and the median and spread of each
-response, the wall time and the cost over the runs that measured (a failed run's values are
-where it stopped, never a measurement), with the best f1 stored for its runs. Given the
+response, the wall time and the cost (each run's own, and the whole protocol's, which f2 ranks)
+over the runs that measured (a failed run's values are where it stopped, never a measurement),
+with the best f1 stored for its runs. The dashboard draws Fig. 5's medians from it. Given the
 experiments' measured values, also each response's Wasserstein-1 distance from the generation's
 runs to the experiment: with the feeder's noise (N_t 0-16 over the ten experiments) a median of
 single runs can sit on the target by chance or miss it with the right sets, while the distance
@@ -30,6 +31,7 @@ import numpy as np
 from scipy.stats import wasserstein_distance
 
 from dem.result import SimulationStatus
+from optimizer.objectives import RunTimes, protocol_times
 from optimizer.outcomes import count_failures
 from optimizer.protocols import TrialRecord
 
@@ -44,14 +46,28 @@ class Run:
     wall_time_s: float | None = None
     cost: float | None = None
     f1: float | None = None  # the objective stored for it (None for a failed set's runs)
+    protocol_wall_time_s: float | None = None  # the whole protocol's (objectives.protocol_times)
+    protocol_cost: float | None = None
+
+    @classmethod
+    def measured(
+        cls,
+        generation: int,
+        status: str | None,
+        responses: Mapping[str, float | None],
+        times: RunTimes,
+        f1: float | None = None,
+    ) -> Run:
+        """A run with its own and its whole protocol's T and cost (``times``: a result, or a
+        stored trial's columns, whose times are None before its result)."""
+        return cls(generation, status, responses, times.wall_time_s, times.cost, f1, **protocol_times(times))
 
     @classmethod
     def of(cls, record: TrialRecord) -> Run:
         result = record.result
         if result is None:
             return cls(record.spec.generation, None)
-        status = result.status.value
-        return cls(record.spec.generation, status, result.responses, result.wall_time_s, result.cost)
+        return cls.measured(record.spec.generation, result.status.value, result.responses, result)
 
 
 def spread(values: Iterable[float]) -> dict[str, float] | None:
@@ -133,6 +149,10 @@ def per_generation(
             "responses": {name: spread(values) for name, values in measured.items()},
             "wall_time_s": spread(run.wall_time_s for run in ok if run.wall_time_s is not None),
             "cost": spread(run.cost for run in ok if run.cost is not None),
+            "protocol_wall_time_s": spread(
+                run.protocol_wall_time_s for run in ok if run.protocol_wall_time_s is not None
+            ),
+            "protocol_cost": spread(run.protocol_cost for run in ok if run.protocol_cost is not None),
             "best_f1": min(f1_values, default=None),
             "w1_to_experiment": w1,
             "as_experiment": {

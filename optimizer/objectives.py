@@ -205,6 +205,15 @@ def protocol_cost(result: RunTimes) -> float:
     return result.cost * result.full_load_factor
 
 
+def protocol_times(run: RunTimes) -> dict[str, float | None]:
+    """A run's whole-protocol T and cost, as the views name them: what f2 is made of (a run that
+    emptied the tray stopped early); None where the run has no time of its own (no result yet)."""
+    return {
+        "protocol_wall_time_s": None if run.wall_time_s is None else protocol_wall_time(run),
+        "protocol_cost": None if run.cost is None else protocol_cost(run),
+    }
+
+
 def _time(result: SimulationResult, objective_time: str) -> float:
     return protocol_wall_time(result) if objective_time == "wall" else protocol_cost(result)
 

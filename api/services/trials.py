@@ -36,7 +36,7 @@ from api.services.generations import latest_generation
 from api.services.views import Served, StudyViewCache
 from api.store import Page, SqlStore, TrialFilter
 from optimizer.generations import Run, per_generation
-from optimizer.objectives import protocol_cost, protocol_wall_time
+from optimizer.objectives import protocol_times
 from optimizer.outcomes import individual_failures, is_failed, measured_n
 from optimizer.protocols import TrialState
 from optimizer.report import response_column, study_parameter_names, trial_csv_columns
@@ -49,22 +49,13 @@ def _objectives(row) -> tuple[float | None, float | None]:
     return finite_or_none(f1), finite_or_none(f2)
 
 
-def _protocol(row) -> dict[str, float | None]:
-    """The whole protocol's T and cost of a stored run, by the functions f2 is made of (a run
-    that emptied the tray stopped early), None before its result."""
-    return {
-        "protocol_wall_time_s": None if row.wall_time_s is None else protocol_wall_time(row),
-        "protocol_cost": None if row.cost is None else protocol_cost(row),
-    }
-
-
 def trial_read(row: TrialRow) -> TrialRead:
     f1, f2 = _objectives(row)
     return TrialRead(
         id=row.id, generation=row.generation, individual=row.individual, replicate=row.replicate,
         seed=row.seed, params=row.params, state=row.state, status=row.status,
         n_remaining=measured_n(row.status, row.n_remaining), responses=row.responses, engine=row.engine,
-        wall_time_s=row.wall_time_s, cost=row.cost, **_protocol(row), f1=f1, f2=f2, pareto=row.pareto,
+        wall_time_s=row.wall_time_s, cost=row.cost, **protocol_times(row), f1=f1, f2=f2, pareto=row.pareto,
         worker=row.worker, attempts=row.attempts, message=row.message, updated_at=row.updated_at,
     )
 
@@ -91,7 +82,7 @@ def _json(document: dict) -> bytes:
 
 def _trial_item(row) -> dict:
     """A ``TrialRead`` as a dict, from a row of ``TRIAL_READ_COLUMNS``."""
-    item = row._asdict() | _protocol(row)
+    item = row._asdict() | protocol_times(row)
     del item["full_load_factor"]
     item["n_remaining"] = measured_n(item["status"], item["n_remaining"])
     item["f1"] = _finite_objective(item.pop("f1_value"), item.pop("f1_kind"))
@@ -175,9 +166,10 @@ def _sort_key(value: float | None) -> float:
     return math.inf if value is None else value
 
 
-# The summary's fields as of this version (2: as_experiment's ``alike``): a part of the ETag's
-# version, so that a browser that cached a finished study's summary before a new field fetches it.
-GENERATIONS_FORMAT = 2
+# The summary's fields as of this version (2: as_experiment's ``alike``; 3: the whole protocol's
+# T and cost): a part of the ETag's version, so that a browser that cached a finished study's
+# summary before a new field fetches it.
+GENERATIONS_FORMAT = 3
 
 
 def generation_summary_json(
@@ -185,7 +177,7 @@ def generation_summary_json(
 ) -> Served:
     """The per-generation summary as JSON, built once per version of the study row like the
     Pareto front (every trial written changes it): the dashboard reads it after each change of
-    the trials for Fig. 5's W1 annotations, so a poll with nothing new is a 304 (``held``: the
+    the trials for Fig. 5's medians and W1s, so a poll with nothing new is a 304 (``held``: the
     client's ``If-None-Match``) and one build serves every dashboard."""
     study = store.study_version(study_id, principal.visible_to)
     build = views.builder("generations", _generation_summary, store, study_id)
@@ -196,8 +188,13 @@ def _generation_summary(store: SqlStore, views: StudyViewCache, study_id: str) -
     """``optimizer/generations.py`` on the stored rows (objectives as stored)."""
     definition = StudyDefinition.model_validate(store.get_study(study_id).definition)
     runs = (
-        Run(row.generation, row.status if row.state == TrialState.DONE.value else None, row.responses or {},
-            row.wall_time_s, row.cost, _objectives(row)[0])
+        Run.measured(
+            row.generation,
+            row.status if row.state == TrialState.DONE.value else None,
+            row.responses or {},
+            row,
+            _objectives(row)[0],
+        )
         for row in store.trial_columns(study_id)
     )
     summaries = [

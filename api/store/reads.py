@@ -110,8 +110,8 @@ class DashboardReads(StoreBase):
             sa.select(
                 TrialRow.id, TrialRow.generation, TrialRow.individual, TrialRow.replicate,
                 TrialRow.state, TrialRow.status, TrialRow.n_remaining, TrialRow.responses,
-                TrialRow.wall_time_s, TrialRow.cost, TrialRow.pareto, TrialRow.f1_value,
-                TrialRow.f1_kind, TrialRow.f2_value, TrialRow.f2_kind, TrialRow.params,
+                TrialRow.wall_time_s, TrialRow.cost, TrialRow.full_load_factor, TrialRow.pareto,
+                TrialRow.f1_value, TrialRow.f1_kind, TrialRow.f2_value, TrialRow.f2_kind, TrialRow.params,
             )
             .where(TrialRow.study_id == study_id)
             .order_by(TrialRow.generation, TrialRow.individual, TrialRow.replicate)

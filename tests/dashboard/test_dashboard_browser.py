@@ -522,6 +522,41 @@ COUNT_COLOURS = """() => {
 }"""
 
 
+def test_fig5_draws_the_medians_get_generations_gives_for_the_response_and_what_f2_ranks(page, dashboard):
+    """The medians are the API's, one source for every view of the generations: here each served
+    median is moved by 100, and the figure draws the moved ones, not medians of the trials it has.
+    Unmoved, (b)'s are the medians of the whole protocol's T over the runs that measured."""
+    medians = "(id) => document.getElementById(id).data.filter((t) => t.name === 'median per generation')"
+    study_id = dashboard.study.study_id
+    served = page.request.get(
+        dashboard.url(f"/api/v1/studies/{study_id}/generations"),
+        headers={"Authorization": f"Bearer {dashboard.study.api_key}"},
+    ).json()
+    protocol: dict[int, list[float]] = {}
+    for record in dashboard.store.trials(study_id):
+        if record.result is not None and record.result.ok:
+            protocol.setdefault(record.spec.generation, []).append(protocol_wall_time(record.result))
+
+    def moved(route):
+        response = route.fetch()
+        entries = response.json()
+        for entry in entries:
+            for spread in (entry["responses"]["n_remaining"], entry["protocol_wall_time_s"]):
+                spread["median"] += 100
+        route.fulfill(response=response, json=entries)
+
+    page.route("**/generations", moved)
+    open_study(page, dashboard)
+    n_t, t = page.evaluate(f"() => ({medians})('generation-plot').map((trace) => trace.y)")
+
+    assert [entry["protocol_wall_time_s"]["median"] for entry in served] == pytest.approx(
+        [statistics.median(protocol[g]) for g in range(5)]
+    )
+    assert n_t == [entry["responses"]["n_remaining"]["median"] + 100 for entry in served]
+    assert t == pytest.approx([entry["protocol_wall_time_s"]["median"] + 100 for entry in served])
+    assert page.errors == []
+
+
 REPLAY_ROUTE = re.compile(r"/trials/[^/]+/replay(\?|$)")  # the API's replay, not replay3d.js
 
 

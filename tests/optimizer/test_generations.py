@@ -80,3 +80,25 @@ def test_a_generation_is_alike_when_its_w1_is_inside_the_experiments_band():
     assert [entry["as_experiment"]["n_remaining"]["alike"] for entry in summary] == [True, False]
     band = summary[0]["as_experiment"]["n_remaining"]
     assert summary[0]["w1_to_experiment"]["n_remaining"] <= band["w1_95"]
+
+
+def test_the_whole_protocols_t_and_cost_are_spread_over_the_runs_that_measured():
+    """What f2 ranks, per generation (Fig. 5's T panel): a run that emptied the tray halfway is
+    priced at twice its own T and cost; a failed run is left out."""
+    from dem.result import SimulationResult, SimulationStatus
+    from optimizer.protocols import TrialRecord, TrialSpec, TrialState
+
+    def run(factor, wall, status=SimulationStatus.OK):
+        spec = TrialSpec("t", "s", 0, 0, 0, 1, {}, {})
+        times = {"wall_time_s": wall, "cost": 10 * wall, "full_load_factor": factor}
+        result = SimulationResult(status=status, n_items=30, n_remaining=0, **times)
+        return Run.of(TrialRecord(spec, TrialState.DONE, result))
+
+    runs = [run(1.0, 4.0), run(2.0, 3.0), run(1.0, 8.0), run(1.0, 1.0, SimulationStatus.UNSTABLE)]
+
+    [summary] = per_generation(runs)
+
+    assert summary["wall_time_s"]["median"] == 4.0  # the runs' own: 3, 4, 8
+    assert summary["protocol_wall_time_s"]["median"] == 6.0  # the protocol's: 4, 6, 8
+    assert summary["protocol_cost"]["median"] == 60.0
+    assert (summary["protocol_wall_time_s"]["min"], summary["protocol_wall_time_s"]["max"]) == (4.0, 8.0)

@@ -134,9 +134,13 @@ const X_AXES = {
 };
 
 // Fig. 5's T panel shows what f2 ranks: the study's objective_time, of the whole protocol.
+// ``summary``: its key in GET /generations, whose medians the panel draws.
 const F2_PANEL = {
-  wall: { title: "computation time T of the whole protocol (s)", value: (t) => t.protocol_wall_time_s },
-  cost: { title: "cost of the whole protocol", value: (t) => t.protocol_cost },
+  wall: {
+    title: "computation time T of the whole protocol (s)", value: (t) => t.protocol_wall_time_s,
+    summary: "protocol_wall_time_s",
+  },
+  cost: { title: "cost of the whole protocol", value: (t) => t.protocol_cost, summary: "protocol_cost" },
 };
 
 // Runs that measured nothing (optimizer/outcomes.py): every status but "ok". Marker and colour
@@ -286,9 +290,10 @@ export function paretoFigure(trials, xKey, maxGeneration, responses, f1unit, f1r
 // made to stop rewarding, and the panel would disagree with the Pareto plot beside it. The
 // hover gives the run's own T too.
 //
-// Each generation's W1 to the experiment (above a response's panel, and in its medians' hover)
-// is the API's (GET /studies/{id}/generations, optimizer/generations.py), ``summaries`` its
-// entries; none are drawn before they are read.
+// Each generation's median and its W1 to the experiment (above a response's panel, and in its
+// medians' hover) are the API's (GET /studies/{id}/generations, optimizer/generations.py),
+// ``summaries`` its entries, so that the figure says what every other view of the generations
+// says; none are drawn before they are read.
 export function generationFigure(trials, responses, maxGeneration, summaries = [], objectiveTime = "cost") {
   const f2 = F2_PANEL[objectiveTime] || F2_PANEL.cost;
   const done = trials.filter((t) => t.state === "done" && !isFailed(t));
@@ -320,13 +325,17 @@ export function generationFigure(trials, responses, maxGeneration, summaries = [
     const byGen = w1Of(r.name);
     if (byGen.size) distances.push({ axisSuffix: i === 0 ? "" : String(i + 3), byGen, bands: bandOf(r.name) });
   }
-  const medianTrace = (value, axisSuffix, name) => {
-    const m = byGeneration(done, value);
+  // ``spreadOf``: an entry's spread of the panel's quantity (none for a generation without a
+  // measured run, which the line then passes by).
+  const medianTrace = (spreadOf, axisSuffix, name) => {
+    const shown = searched.filter((entry) => spreadOf(entry));
+    const x = shown.map((entry) => entry.generation);
+    const y = shown.map((entry) => spreadOf(entry).median);
     const byGen = name === undefined ? null : w1Of(name);
-    const w1 = byGen?.size ? m.x.map((g) => byGen.get(g) ?? null) : null;
+    const w1 = byGen?.size ? x.map((g) => byGen.get(g) ?? null) : null;
     return {
       type: "scatter", mode: "lines+markers", name: "median per generation", showlegend: axisSuffix === "",
-      x: m.x, y: m.y, xaxis: "x" + axisSuffix, yaxis: "y" + axisSuffix,
+      x, y, xaxis: "x" + axisSuffix, yaxis: "y" + axisSuffix,
       line: { color: MEDIAN, width: 3 }, marker: { size: 8, color: MEDIAN },
       customdata: w1 ?? undefined,
       hovertemplate: "generation %{x}<br>median %{y:.3g}" +
@@ -337,8 +346,9 @@ export function generationFigure(trials, responses, maxGeneration, summaries = [
   const data = [];
   responses.forEach((r, i) => {
     const value = (t) => measuredValue(t, r);
-    data.push(points(done.map(value), suffixOf(i)), medianTrace(value, suffixOf(i), r.name));
-    if (i === 0) data.push(points(done.map(f2.value), "2"), medianTrace(f2.value, "2"));
+    const spreadOf = (entry) => entry.responses?.[r.name];
+    data.push(points(done.map(value), suffixOf(i)), medianTrace(spreadOf, suffixOf(i), r.name));
+    if (i === 0) data.push(points(done.map(f2.value), "2"), medianTrace((entry) => entry[f2.summary], "2"));
   });
   if (distances.some((d) => d.bands.size)) {
     // The shaded bands are layout shapes, which have no legend entry: this empty trace is it.

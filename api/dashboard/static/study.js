@@ -28,7 +28,7 @@ const POLL_MS = 3000;
 const TERMINAL = new Set(["done", "cancelled", "failed"]);
 
 const trials = new Map();
-let generations = []; // GET /generations: each generation's W1 to the experiment, for Fig. 5
+let generations = []; // GET /generations: each generation's medians and W1, for Fig. 5
 let study = null;
 let responses = []; // the experiments' responses with units (api.js experimentResponses)
 let cursor = null; // the study's change number at the last page: the next poll asks for later ones
@@ -107,7 +107,8 @@ function maxGeneration() {
 // The Pareto front first (it is what the page is for); the two figures below the fold are
 // drawn in the next frame so that the front shows up without waiting for them. With
 // ``readGenerations`` (the trials changed), the per-generation summary is read meanwhile, once
-// per change (a cached view: its ETag makes it a 304 when nothing changed), for Fig. 5's W1.
+// per change (a cached view: its ETag makes it a 304 when nothing changed), for Fig. 5's medians
+// and W1s.
 async function renderPlots(readGenerations = false) {
   const summaries = readGenerations ? api(`${base}/generations`) : null;
   await plotlyReady();
