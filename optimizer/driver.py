@@ -628,7 +628,7 @@ def _validated(
         return None, _verdict(ranking)
     rows = validation.table(checked, records, definition, pooled) if definition.validation.seeds else []
     validated = [i for i, row in enumerate(rows) if row["verdict"] == validation.VALIDATED]
-    floors = {x.response: x.noise_floor(len(x.measured)) for x in definition.experiments}
+    floors = {x.response: x.noise_floor(len(x.measured)) for x in definition.experiments} if rows else {}
     close = [_as_close_as_a_repeat(row, floors) for row in rows]
     chosen = min(validated, key=lambda i: (not close[i], checked[i].f2, i)) if validated else None
     status = (

@@ -286,6 +286,9 @@ def test_a_trial_gives_the_whole_protocols_t_and_cost_that_f2_ranks(client, keys
     assert done["protocol_cost"] == pytest.approx(evaluation.f2)  # what the search ranked (cost)
     assert {key: one[key] for key in done} == done
     assert pending["protocol_wall_time_s"] is None and pending["protocol_cost"] is None
+    (generation,) = client.get(f"/api/v1/studies/{study_id}/generations", headers=keys.auth()).json()
+    assert generation["protocol_cost"]["median"] == pytest.approx(2.5 * result.cost)  # Fig. 5's T panel
+    assert generation["protocol_wall_time_s"]["median"] == pytest.approx(protocol_wall_time(result))
 
 
 def test_the_generation_summary_is_built_once_per_change_and_a_poll_without_one_is_a_304(
