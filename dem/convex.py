@@ -521,11 +521,57 @@ def _copy_row(dst, i, src, j):
     dst[i, 0], dst[i, 1], dst[i, 2] = src[j, 0], src[j, 1], src[j, 2]
 
 
+@numba.njit(inline="always", **JIT_FLAGS)
+def _outline(pts, m, out, eps):
+    """``_hull2``'s hull of pts[:m], to the bit, if they are in their order the corners of a convex
+    polygon going once round one way, every three consecutive corners' cross product beyond eps^2
+    by a margin (1e-12 of the points' largest |x| + |y|, squared) far above the cross products'
+    rounding (about 1e-16 of it): then any three of the points turn the same way by at least as
+    much (the least triangle on a convex polygon's corners is of three consecutive ones), every
+    test of the monotone chain goes the way the geometry says and none merges, so the chain keeps
+    them all, counter-clockwise from the least in (x, y); they are copied in that order. Else 0
+    (and ``_hull2`` sorts). ``tests/dem/test_polyhedra.py`` checks it against the chain."""
+    if m < 3:
+        return 0
+    lo = 0
+    size = abs(pts[0, 0]) + abs(pts[0, 1])
+    for a in range(1, m):
+        if pts[a, 0] < pts[lo, 0] or (pts[a, 0] == pts[lo, 0] and pts[a, 1] < pts[lo, 1]):
+            lo = a
+        size = max(size, abs(pts[a, 0]) + abs(pts[a, 1]))
+    least = eps * eps + 1e-12 * size * size
+    sense = 1.0 if _cross2(pts[m - 1], pts[0], pts[1]) > 0.0 else -1.0
+    turns = 0
+    last = pts[0, 0] - pts[m - 1, 0]
+    for a in range(m):
+        b = a + 1 if a + 1 < m else 0
+        if sense * _cross2(pts[a - 1 if a > 0 else m - 1], pts[a], pts[b]) <= least:
+            return 0
+        dx = pts[b, 0] - pts[a, 0]
+        if dx != 0.0:
+            if last != 0.0 and (dx > 0.0) != (last > 0.0):
+                turns += 1
+            last = dx
+    if turns != 2:  # round more than once (a star), or x never turning back
+        return 0
+    step = 1 if sense > 0.0 else m - 1
+    k = lo
+    for a in range(m):
+        _copy_row(out, a, pts, k)
+        k = (k + step) % m
+    return m
+
+
 @numba.njit(**STEP_FLAGS)
 def _hull2(pts, m, out, eps):
     """Counter-clockwise convex hull of pts[:m] (Andrew's monotone chain; column 2 rides along)
     into out; returns its size. Points closer than eps collapse; collinear points are dropped,
-    so a segment has 2 points."""
+    so a segment has 2 points. Points that come as a convex outline (a whole face of a core
+    whose rows go round it, ``dem.polyhedra.face_loop_order``) are their hull as they are
+    (``_outline``): the same rows in the same order, without the sort."""
+    h = _outline(pts, m, out, eps)
+    if h > 0:
+        return h
     for a in range(1, m):  # insertion sort by (x, y): features are small
         x, y, h = pts[a, 0], pts[a, 1], pts[a, 2]
         b = a - 1

@@ -151,6 +151,44 @@ def shrink_convex(points: np.ndarray, rounding: float) -> np.ndarray:
     return core[ConvexHull(core).vertices] if len(core) > 3 else core
 
 
+def face_loop_order(core: np.ndarray) -> np.ndarray:
+    """Rows of ``core`` (a convex polytope's vertices) reordered so that its largest faces, in
+    turn while their vertices are free, are runs of consecutive rows going round the face
+    (counter-clockwise about its outward normal), the other vertices after them. A contact's
+    feature lists its vertices in row order, so a whole face (a phone's top, 20 of its 40) comes as
+    its outline, whose hull ``dem.convex._hull2`` takes without sorting. The same polytope: only
+    the rows' order changes."""
+    core = np.asarray(core, dtype=np.float64)
+    if len(core) <= 3:
+        return np.arange(len(core))
+    try:
+        hull = ConvexHull(core)
+    except QhullError:  # flat: no faces
+        return np.arange(len(core))
+    scale = float(np.ptp(core, axis=0).max())
+    keys = np.round(hull.equations / np.array([1e-9, 1e-9, 1e-9, 1e-9 * scale])).astype(np.int64)
+    _, face = np.unique(keys, axis=0, return_inverse=True)
+    face = np.ravel(face)
+    faces = [np.unique(hull.simplices[face == f]) for f in range(face.max() + 1)]
+    normals = [hull.equations[np.flatnonzero(face == f)[0], :3] for f in range(len(faces))]
+    used = np.zeros(len(core), dtype=bool)
+    order: list[int] = []
+    for f in sorted(range(len(faces)), key=lambda f: (-len(faces[f]), f)):
+        rows = faces[f]
+        if len(rows) < 3 or used[rows].any():
+            continue
+        n = normals[f]
+        e1 = core[rows[1]] - core[rows[0]]
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(n, e1)
+        rel = core[rows] - core[rows].mean(axis=0)
+        angle = np.arctan2(rel @ e2, rel @ e1)
+        order.extend(int(k) for k in rows[np.argsort(angle, kind="stable")])
+        used[rows] = True
+    order.extend(int(k) for k in np.flatnonzero(~used))
+    return np.array(order)
+
+
 def thinnest_dimension(points: np.ndarray) -> float:
     """Smallest extent of ``points`` along the principal axes of their hull's oriented box."""
     obb = trimesh.convex.convex_hull(points).bounding_box_oriented
@@ -219,6 +257,7 @@ def make_polyhedron(
             core = core[simplify_core(core, core_tolerance * rounding)]
         elif len(core) > MAX_CORE_VERTICES:
             core = _simplify(core)
+        core = core[face_loop_order(core)]
         starts.append(sum(counts))
         counts.append(len(core))
         cores.append(core)

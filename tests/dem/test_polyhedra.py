@@ -10,12 +10,13 @@ import pytest
 import trimesh
 from scipy.optimize import minimize
 
-from dem.convex import _REL_EPS, contact_patch, gjk_distance, place, scratch
+from dem.convex import _REL_EPS, _hull2, _outline, contact_patch, gjk_distance, place, scratch
 from dem.polyhedra import (
     ROUNDING_FRACTION,
     Polyhedron,
     PolyhedronError,
     convex_pieces,
+    face_loop_order,
     make_polyhedron,
     shrink_convex,
     simplify_core,
@@ -268,3 +269,70 @@ def test_rounded_box_core_and_reach():
     assert box.core.max(axis=0) == pytest.approx([0.018, 0.013, 0.003])
     assert box.piece_reach(0) == pytest.approx(math.sqrt(0.018**2 + 0.013**2 + 0.003**2) + 0.002)
     assert box.mass == pytest.approx(1000 * 0.04 * 0.03 * 0.01)
+
+
+def test_a_phones_top_and_bottom_faces_are_runs_of_rows_going_round_them():
+    spec = CATALOGUE["smartphone"]
+    phone = make_polyhedron(spec.mesh(), mass=spec.mass, pieces=spec.pieces())
+    core = phone.core
+
+    assert len(core) == 40
+    for rows, outward in ((range(0, 20), -1.0), (range(20, 40), 1.0)):
+        face = core[list(rows)]
+        assert np.ptp(face[:, 2]) < 1e-12  # one face ...
+        for k in range(20):  # ... gone round counter-clockwise about its outward normal
+            a, b, c = face[k - 1], face[k], face[(k + 1) % 20]
+            assert outward * np.cross(b - a, c - b)[2] > 0.0
+
+
+def test_a_cores_row_order_keeps_its_vertices():
+    rng = np.random.default_rng(3)
+    for points in (CUBE, rng.normal(size=(30, 3)), np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])):
+        order = face_loop_order(points)
+        assert sorted(order.tolist()) == list(range(len(points)))
+    cube = face_loop_order(CUBE)  # two opposite faces of four, each gone round
+    for face in (CUBE[cube[:4]], CUBE[cube[4:]]):
+        normal = np.cross(face[1] - face[0], face[2] - face[1])
+        assert np.all(np.abs((face - face[0]) @ normal) < 1e-12)
+        for k in range(4):
+            assert np.dot(np.cross(face[k] - face[k - 1], face[(k + 1) % 4] - face[k]), normal) > 0.0
+
+
+def test_an_outlines_hull_is_the_sorted_hull_bit_for_bit():
+    """``_hull2`` of points given as a convex outline (either way round, from any corner) takes
+    them as they are (``_outline``) and equals the sorted chain's hull of the same points
+    shuffled, to the bit; a star or a dent goes to the chain."""
+    rng = np.random.default_rng(11)
+    taken = 0
+    for trial in range(300):
+        m = int(rng.integers(3, 25))
+        angles = np.sort(rng.uniform(0.0, 2 * np.pi, m))
+        if np.min(np.diff(np.r_[angles, angles[0] + 2 * np.pi])) < 0.05:
+            continue
+        centre = rng.uniform(-0.5, 0.5, 2)
+        radii = rng.uniform(1e-3, 5e-2, 2)
+        pts = np.zeros((128, 3))
+        pts[:m, 0] = centre[0] + radii[0] * np.cos(angles)
+        pts[:m, 1] = centre[1] + radii[1] * np.sin(angles)
+        pts[:m, 2] = rng.uniform(0.0, 1e-4, m)
+        if trial % 2:
+            pts[:m] = pts[:m][::-1]
+        pts[:m] = np.roll(pts[:m], int(rng.integers(m)), axis=0)
+        eps = 1e-12
+        shuffled = pts.copy()
+        shuffled[:m] = pts[rng.permutation(m)]
+        sorted_hull = np.zeros((128, 3))
+        h = _hull2(shuffled, m, sorted_hull, eps)
+        outline = np.zeros((128, 3))
+        assert _outline(pts.copy(), m, outline, eps) == m
+        assert h == m
+        np.testing.assert_array_equal(outline[:m], sorted_hull[:m])
+        taken += 1
+    assert taken > 100
+    star = np.zeros((128, 3))  # a pentagram's corners: every turn the same way, twice round
+    star[:5, :2] = [[np.cos(a), np.sin(a)] for a in 4 * np.pi / 5 * np.arange(5)]
+    assert _outline(star, 5, np.zeros((128, 3)), 1e-12) == 0
+    dent = np.zeros((128, 3))
+    dent[:4, :2] = [[0, 0], [1, 0], [0.2, 0.2], [0, 1]]
+    assert _outline(dent, 4, np.zeros((128, 3)), 1e-12) == 0
+    assert _hull2(dent, 4, np.zeros((128, 3)), 1e-12) == 3
