@@ -4,20 +4,27 @@ Goals: <= 20 s CPU at E = 1e7 Pa with clumps (issue 15; CPU time is the figure o
 machine); rounded polyhedra at most 1.5x the clumps' time, and a run
 that clogs (``--clogging``: e 0.2, mu 0.9, no early stop) in <= 30 s on one core (issue 12).
 
-    NUMBA_NUM_THREADS=1 python benchmarks/feeder.py [--E 1e7 1e8] [--seed 1] [--vibration-time 60]
+    NUMBA_NUM_THREADS=1 python benchmarks/feeder.py [--E 1e7 1e8] [--seed 1 2 3] [--vibration-time 60]
         [--representation polyhedron clump] [--clogging] [--core-tolerance 0.1 0]
 
 Not a test: timings depend on the machine. ``--vibration-time`` shortens the vibration stage to
 extrapolate when the full run is too slow (say so when you report it). ``--core-tolerance``
 runs the polyhedra once per value (``items.core_tolerance``: the cores' simplification as a
 fraction of the rounding r; 0 keeps every core vertex up to 48, as before session 15), in turn.
+
+A run's CPU time follows the path its pile takes (on one seed the polyhedra took 34-61 s as
+rounding changed the path, benchmarks/README session 19), so give several ``--seed``: the
+representations run in turn for each seed (alternated, so the machine's load falls on both),
+and the last lines give each one's mean and range over the seeds and the ratio of the means.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import time
+from collections import defaultdict
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
@@ -30,7 +37,7 @@ CLOGGING = {"e": 0.2, "mu": 0.9}  # --clogging: items stay on the tray (also ben
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--E", type=float, nargs="+", default=[1e7, 1e8])
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seed", type=int, nargs="+", default=[1])
     parser.add_argument("--vibration-time", type=float, default=None)
     parser.add_argument("--config", default="examples/feeder.toml")
     parser.add_argument("--representation", nargs="+", default=["polyhedron", "clump"])
@@ -46,25 +53,48 @@ def main() -> None:
         f"{'shape':>10} {'E, Pa':>8} {'wall, s':>8} {'cpu, s':>7} {'sim, s':>7} {'steps':>9} {'dt, s':>9}"
     )
     print(f"{header} {'us/step':>8} {'N_t':>4} status")
-    tolerances = args.core_tolerance or [config.items.core_tolerance]
+    tolerances = args.core_tolerance or [None]  # None: the config's own
     runs = [
         (rep, tol) for rep in args.representation for tol in (tolerances if rep == "polyhedron" else [None])
     ]
-    for representation, tolerance in runs:
-        config.items.representation = representation
-        if tolerance is not None:
-            config.items.core_tolerance = tolerance
-            print(f"polyhedra, core_tolerance {tolerance} r", flush=True)
-        for E in args.E:
-            started, cpu = time.perf_counter(), time.process_time()
-            r = run_feeder(config, {"E": E, **params}, args.seed)
-            wall, cpu = time.perf_counter() - started, time.process_time() - cpu
-            print(
-                f"{representation:>10} {E:8.0e} {wall:8.1f} {cpu:7.1f} {r.sim_time:7.2f} {r.steps:9d} "
-                f"{r.dt:9.3g} {1e6 * cpu / max(r.steps, 1):8.1f} {r.n_remaining:4d} {r.status.value} "
-                f"{r.message}",
-                flush=True,
-            )
+    cpu_by_run: dict[tuple[str, float | None, float], list[float]] = defaultdict(list)
+    for seed in args.seed:
+        for representation, tolerance in runs:
+            config.items.representation = representation
+            if tolerance is not None:
+                config.items.core_tolerance = tolerance
+            for E in args.E:
+                started, cpu = time.perf_counter(), time.process_time()
+                r = run_feeder(config, {"E": E, **params}, seed)
+                wall, cpu = time.perf_counter() - started, time.process_time() - cpu
+                cpu_by_run[(representation, tolerance, E)].append(cpu)
+                shape = _label(representation, tolerance)
+                print(
+                    f"{shape:>10} {E:8.0e} {wall:8.1f} {cpu:7.1f} {r.sim_time:7.2f} {r.steps:9d} "
+                    f"{r.dt:9.3g} {1e6 * cpu / max(r.steps, 1):8.1f} {r.n_remaining:4d} {r.status.value} "
+                    f"seed {seed} {r.message}",
+                    flush=True,
+                )
+    if len(args.seed) > 1 or len(runs) > 1:
+        _print_means(cpu_by_run, args.seed)
+
+
+def _label(representation: str, tolerance: float | None) -> str:
+    return representation if tolerance is None else f"{representation} {tolerance:g}r"
+
+
+def _print_means(cpu_by_run: dict[tuple[str, float | None, float], list[float]], seeds: list[int]) -> None:
+    """Each run's CPU time over the seeds, and each representation's against the clumps' (ratio of
+    the means: a seed's pile path moves both, so a per-seed ratio is noisier)."""
+    print(f"over seeds {' '.join(map(str, seeds))}: CPU s mean (least-most); against clumps")
+    for (representation, tolerance, E), cpus in cpu_by_run.items():
+        clumps = cpu_by_run.get(("clump", None, E))
+        against = f"{statistics.mean(cpus) / statistics.mean(clumps):.2f}x" if clumps else "-"
+        shape, mean = _label(representation, tolerance), statistics.mean(cpus)
+        print(
+            f"{shape:>10} {E:8.0e} {mean:7.1f} ({min(cpus):.1f}-{max(cpus):.1f}) {against}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":
