@@ -174,7 +174,10 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         "validation_status": (study.recommendation or {}).get("validation_status"),
         "chosen_by": (study.recommendation or {}).get("chosen_by"),
         "validation": (study.recommendation or {}).get("validation", []),
-        "equivalent": [summary(evaluation) for evaluation in ranking.equivalent],
+        # The recommendation's own list once the driver stored one: after the validation it holds
+        # the search's other matches *and* its fastest match when a validated set was chosen over it.
+        "equivalent": (study.recommendation or {}).get("equivalent")
+        or [summary(evaluation) for evaluation in ranking.equivalent],
         "pareto": [summary(evaluation) for evaluation in ranking.pareto],
         "generations": generations,
         "progress": study_progress(

@@ -66,6 +66,26 @@ def test_results_folder_holds_every_trial_and_the_recommendation(tmp_path, small
     assert summary["simulations_until_first_match"] == first + 1
 
 
+def test_the_equivalent_sets_are_the_recommendations_own_once_the_validation_chose_it(
+    tmp_path, small_definition
+):
+    """The paper's study (calibration 20) recommended validated #172 over the search's fastest match
+    #20: summary.json and the CLI listed only #86 as equivalent, the recommendation #20 and #86."""
+    store = MemoryStore()
+    study_id = store.create_study(small_definition.model_dump(mode="json"))
+    Driver(store, SyntheticExecutor(matching_where_mu_above(0.5))).run_to_completion(study_id, poll_timeout=0)
+    study = store.load_study(study_id)
+    searched = write_results(tmp_path / "search", study, store.trials(study_id))
+    fastest = searched["recommendation"]
+    validated = next(m for m in searched["pareto"] if m["individual"] != fastest["individual"])
+    study.recommendation = {**validated, "equivalent": [fastest, *searched["equivalent"]]}
+
+    summary = write_results(tmp_path / "validated", study, store.trials(study_id))
+
+    assert summary["equivalent"] == study.recommendation["equivalent"]
+    assert fastest["individual"] in {member["individual"] for member in summary["equivalent"]}
+
+
 def test_a_study_without_a_match_has_no_recommendation(tmp_path, small_definition):
     summary, rows = run_and_write(tmp_path, small_definition, matching_where_mu_above(2.0))
 
