@@ -149,6 +149,7 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
             definition.measured_by_response(),
         )
     ]
+    stored = study.recommendation or {}  # the driver's, once it stored one
     return {
         "study_id": study.study_id,
         "name": definition.name,
@@ -171,17 +172,19 @@ def build_summary(study: StudyRecord, records: list[TrialRecord]) -> dict[str, A
         # (``chosen_by`` says how it was chosen).
         "recommendation": study.recommendation
         or (summary(ranking.recommendation) if ranking.recommendation else None),
-        "validation_status": (study.recommendation or {}).get("validation_status"),
-        "chosen_by": (study.recommendation or {}).get("chosen_by"),
-        "validation": (study.recommendation or {}).get("validation", []),
-        # The recommendation's own list once the driver stored one: after the validation it holds
-        # the search's other matches *and* its fastest match when a validated set was chosen over it.
-        "equivalent": (study.recommendation or {}).get("equivalent")
-        or [summary(evaluation) for evaluation in ranking.equivalent],
+        "validation_status": stored.get("validation_status"),
+        "chosen_by": stored.get("chosen_by"),
+        "validation": stored.get("validation", []),
+        # The recommendation's own list once the driver stored one (even empty: the ranking's could
+        # hold the validated pick): after the validation it holds the search's other matches *and*
+        # its fastest match when a validated set was chosen over it.
+        "equivalent": stored["equivalent"]
+        if "equivalent" in stored
+        else [summary(evaluation) for evaluation in ranking.equivalent],
         "pareto": [summary(evaluation) for evaluation in ranking.pareto],
         "generations": generations,
         "progress": study_progress(
-            records, definition, study.generation, (study.recommendation or {}).get("validation", [])
+            records, definition, study.generation, stored.get("validation", [])
         ).as_json(),
         "identifiability": study_identifiability(evaluations, definition, space),
     }
