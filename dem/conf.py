@@ -6,7 +6,8 @@ would make results depend on the compiler's choices and break determinism across
 Numba's cache checks only the source file of the cached function, not the modules it calls (the
 run loop in ``dem/loop.py`` calls kernels of ``dem/integrate.py``, ``dem/neighbours.py``,
 ``dem/forces.py``, ``dem/facets.py``, ``dem/contact.py``, ``dem/rounded_contact.py``,
-``dem/crown.py``, ``dem/convex.py``, ``dem/motion.py``, ``dem/quaternion.py``):
+``dem/kept_contact.py``, ``dem/crown.py``, ``dem/convex.py``, ``dem/motion.py``,
+``dem/quaternion.py``):
 after editing one of those in a working copy, delete ``dem/__pycache__/*.nb[ic]`` (installed
 releases change every file at once, so they are safe).
 This module imports nothing of the engine (every kernel module imports it), and of numba only

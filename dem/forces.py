@@ -10,6 +10,9 @@ involve more than one sphere contact:
   contacts sums their ``share_sums`` per group, the second applies the forces;
 * the facet rule of ``dem/walls.py``: an edge or vertex contact is dropped when its contact
   point also lies on another touched facet of the same wall that is at least as close.
+* a lasting contact of a rounded piece (with a piece, a sphere or a facet) whose bodies have not
+  moved relative to each other since its last full evaluation, by more than a thousandth of its
+  overlap, is served from that evaluation (``dem/kept_contact.py``): a resting pile's contacts.
 
 A row that is a rounded-polyhedron piece (``core_count > 0``) gets its overlap, normal, contact
 point and patch from ``dem/rounded_contact.py`` instead of the sphere formulas (a plain sphere
@@ -48,6 +51,17 @@ from dem.contact import (
 )
 from dem.convex import at_point, place_body
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
+from dem.kept_contact import (
+    K_FACE,
+    K_M,
+    WALL_FRAME,
+    body_frame,
+    keep_apart,
+    keep_contact,
+    kept_contact,
+    moves_beyond,
+    row_reach,
+)
 from dem.materials import L_KT, L_MU, L_ZETA
 from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS, N_WALKS
 from dem.rounded_contact import WallFacet, box_extent, facet_axis_clears, facet_geometry, pair_geometry
@@ -309,6 +323,28 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                 if low_a - high_b > (rounding[i] + rounding[j]) * BOX_SLACK:
                     pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
                     continue
+            # A lasting contact whose bodies have not moved relative to each other is served from
+            # its last full evaluation (``dem/kept_contact.py``): a resting pile's pairs.
+            ba, bb = sbody[i], sbody[j]
+            frame_a, frame_b = body_frame(rot, ba), body_frame(rot, bb)
+            origin_a, origin_b = (pos[ba, 0], pos[ba, 1], pos[ba, 2]), (pos[bb, 0], pos[bb, 1], pos[bb, 2])
+            key = (i + 1.0, j + 1.0)
+            served, delta, nx, ny, nz, cx, cy, cz = kept_contact(
+                pairs.kept, p, key, frame_a, origin_a, frame_b, origin_b
+            )
+            if served and delta <= 0.0:  # kept apart
+                pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
+                continue
+            if served:
+                if delta > lim * min(rounding[i], rounding[j]):
+                    return n_contacts, ba
+                _keep_piece_contact(pairs, grp_sum, g, single, p, delta, (nx, ny, nz), (cx, cy, cz))
+                pairs.moment[p, 0] = pairs.kept[p, K_M]
+                pairs.moment[p, 1] = pairs.kept[p, K_M + 1]
+                pairs.moment[p, 2] = pairs.kept[p, K_M + 2]
+                _add_sums(grp_sum, g, delta, _approach_rate(bodies, ba, bb, pairs.point[p], (nx, ny, nz)))
+                n_deferred += 1
+                continue
             # The pieces' cores (a plain sphere is a one-vertex core at its centre), written out
             # here on the arrays at hand: a helper given arrays or the containers costs an atomic
             # reference count up and down for each (25 for Bodies and Spheres), which was a third
@@ -335,25 +371,53 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                 work,
                 pp_hist[p, 0] != 0.0 or pp_hist[p, 1] != 0.0 or pp_hist[p, 2] != 0.0,  # touched last step
             )
+            # Kept for the next steps if the bodies move slowly enough for it to be served: a
+            # contact, or a pair apart by a margin (``dem/kept_contact.py``).
+            reach = row_reach(
+                pairs.kept, p, key, core, core_start, core_count, rounding, x, pos, bb, j, rounding[i]
+            )
+            still = delta != 0.0 and not moves_beyond(
+                pairs.kept,
+                p,
+                hist_dt,
+                (vel[ba, 0], vel[ba, 1], vel[ba, 2]),
+                (omega[ba, 0], omega[ba, 1], omega[ba, 2]),
+                origin_a,
+                (vel[bb, 0], vel[bb, 1], vel[bb, 2]),
+                (omega[bb, 0], omega[bb, 1], omega[bb, 2]),
+                origin_b,
+                reach,
+                delta,
+            )
             if delta <= 0.0:
                 pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
+                if still:
+                    keep_apart(pairs.kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
                 continue
             if dist == 0.0 or delta > lim * min(rounding[i], rounding[j]):
                 return n_contacts, sbody[i]
-            pp_delta[p] = delta
-            pp_n[p, 0], pp_n[p, 1], pp_n[p, 2] = nx, ny, nz
             # The middle of the overlap along n (as for spheres): the mid-plane point moved by
             # (r_b - r_a) / 2.
             shift = 0.5 * (rounding[j] - rounding[i])
-            pairs.point[p, 0] = cx + shift * nx
-            pairs.point[p, 1] = cy + shift * ny
-            pairs.point[p, 2] = cz + shift * nz
+            point = (cx + shift * nx, cy + shift * ny, cz + shift * nz)
+            _keep_piece_contact(pairs, grp_sum, g, single, p, delta, (nx, ny, nz), point)
             pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2] = s_uu, s_uw, s_ww
-            if single:
-                for k in range(N_SUMS):
-                    grp_sum[g, k] = 0.0
-            rate = _approach_rate(bodies, sbody[i], sbody[j], pairs.point[p], (nx, ny, nz))
-            _add_sums(grp_sum, g, delta, rate)
+            if still:
+                keep_contact(
+                    pairs.kept,
+                    p,
+                    key,
+                    reach,
+                    frame_a,
+                    origin_a,
+                    frame_b,
+                    origin_b,
+                    delta,
+                    (nx, ny, nz),
+                    point,
+                    (s_uu, s_uw, s_ww),
+                )
+            _add_sums(grp_sum, g, delta, _approach_rate(bodies, ba, bb, point, (nx, ny, nz)))
             n_deferred += 1
             continue
         d = math.sqrt(d2)
@@ -410,6 +474,18 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
         _twist(torque, bb, -tx, -ty, -tz)
         n_contacts += 1
     return n_contacts, -1
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _keep_piece_contact(pairs, grp_sum, g, single, p, delta, n, point):
+    """Writes a touching piece pair's overlap, normal and contact point for the second pass,
+    and clears its group's sums if it is the group's only pair."""
+    pairs.delta[p] = delta
+    pairs.normal[p, 0], pairs.normal[p, 1], pairs.normal[p, 2] = n
+    pairs.point[p, 0], pairs.point[p, 1], pairs.point[p, 2] = point
+    if single:
+        for k in range(N_SUMS):
+            grp_sum[g, k] = 0.0
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -474,7 +550,17 @@ def _wall_approach_rate(bodies, b, wall_v, point, delta, n):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat):
+def _facet_contact(wall_pairs, p, delta, n, point):
+    """Writes a touching piece-facet pair's overlap, normal (facet -> piece) and the patch centre
+    on the facet, half the overlap outside the point where the force acts (``point``)."""
+    wall_pairs.delta[p] = delta
+    wall_pairs.normal[p, 0], wall_pairs.normal[p, 1], wall_pairs.normal[p, 2] = n
+    for k in range(3):
+        wall_pairs.point[p, k] = point[k] + 0.5 * delta * n[k]
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, step):
     """Listed sphere-facet pair p's overlap, normal and contact point (``wall_pairs.delta``,
     ``normal``, ``point``, ``keep`` for a face contact), its spring cleared when apart. Returns
     (it touches, offending body or -1)."""
@@ -504,6 +590,27 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat):
         apart = low - plane > reach or plane - high > reach
     if not apart and spheres.core_count[i] > 0:
         b = sbody[i]
+        # A lasting contact whose body has not moved relative to the wall is served from its
+        # last full evaluation (``dem/kept_contact.py``: A the wall, B the piece, so the kept
+        # direction is the facet's normal turned round): a resting pile on the tray's floor.
+        frame_b = body_frame(bodies.rot, b)
+        origin_a, origin_b = (
+            (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
+            (pos[b, 0], pos[b, 1], pos[b, 2]),
+        )
+        key = (i + 1.0, f + 1.0)
+        served, delta, nx, ny, nz, cx, cy, cz = kept_contact(
+            wall_pairs.kept, p, key, WALL_FRAME, origin_a, frame_b, origin_b
+        )
+        if served and delta > 0.0:
+            if delta > lim * spheres.rounding[i]:
+                return False, b
+            _facet_contact(wall_pairs, p, delta, (-nx, -ny, -nz), (cx, cy, cz))
+            for k in range(3):
+                wall_pairs.moment[p, k] = wall_pairs.kept[p, K_M + k]
+            wp_keep[p] = wall_pairs.kept[p, K_FACE] != 0.0
+            return True, -1
+        apart = served  # kept apart
         core = place_body(spheres.core_start[i], spheres.core_count[i], bodies.rot, pos, b)
         # The pair's cached direction (the facet's closest points to the core when its triangles
         # were last taken one by one, ``facet_geometry``): the piece's box, then its core, further
@@ -513,7 +620,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat):
         # end in the shaking. A pair that touched at the last step (its spring set) would not
         # pass; it skips the test.
         sx, sy, sz = wall_pairs.axis[p, 0], wall_pairs.axis[p, 1], wall_pairs.axis[p, 2]
-        if (sx != 0.0 or sy != 0.0 or sz != 0.0) and (
+        if (not apart and (sx != 0.0 or sy != 0.0 or sz != 0.0)) and (
             wp_hist[p, 0] == 0.0 and wp_hist[p, 1] == 0.0 and wp_hist[p, 2] == 0.0
         ):
             apart = facet_axis_clears(
@@ -552,6 +659,36 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat):
                 spheres.work,
                 wall_pairs.axis[p],
             )
+            # Kept for the next steps if the piece moves slowly enough for it to be served (as
+            # for piece pairs).
+            reach = row_reach(
+                wall_pairs.kept,
+                p,
+                key,
+                spheres.core,
+                spheres.core_start,
+                spheres.core_count,
+                spheres.rounding,
+                x,
+                pos,
+                b,
+                i,
+                0.0,
+            )
+            w_v = walls.vel[w]
+            still = delta != 0.0 and not moves_beyond(
+                wall_pairs.kept,
+                p,
+                step,
+                (w_v[0], w_v[1], w_v[2]),
+                (0.0, 0.0, 0.0),
+                origin_a,
+                (bodies.vel[b, 0], bodies.vel[b, 1], bodies.vel[b, 2]),
+                (bodies.omega[b, 0], bodies.omega[b, 1], bodies.omega[b, 2]),
+                origin_b,
+                reach,
+                delta,
+            )
             if delta > 0.0:
                 if dist == 0.0 or delta > lim * spheres.rounding[i]:
                     return False, b
@@ -563,7 +700,31 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat):
                 wp_cp[p, 2] = cz - 0.5 * dist * nz
                 wall_pairs.moment[p, 0], wall_pairs.moment[p, 1], wall_pairs.moment[p, 2] = s_uu, s_uw, s_ww
                 wp_keep[p] = is_face
+                if still:
+                    # The force acts half the overlap inside the patch centre (``_wall_forces``).
+                    point = (
+                        wp_cp[p, 0] - 0.5 * delta * nx,
+                        wp_cp[p, 1] - 0.5 * delta * ny,
+                        wp_cp[p, 2] - 0.5 * delta * nz,
+                    )
+                    keep_contact(
+                        wall_pairs.kept,
+                        p,
+                        key,
+                        reach,
+                        WALL_FRAME,
+                        origin_a,
+                        frame_b,
+                        origin_b,
+                        delta,
+                        (-nx, -ny, -nz),
+                        point,
+                        (s_uu, s_uw, s_ww),
+                    )
+                    wall_pairs.kept[p, K_FACE] = 1.0 if is_face else 0.0
                 return True, -1
+            if still:
+                keep_apart(wall_pairs.kept, p, key, reach, WALL_FRAME, origin_a, frame_b, origin_b, delta)
             apart = True
     if not apart:
         d2, cx, cy, cz, is_face = closest_point_on_facet(
@@ -633,7 +794,7 @@ def _wall_forces(bodies, spheres, material, walls, lists, lim, hist_dt):
     for g in range(wall_pairs.count[N_WALKS] + 1):
         p_first, p_end = walk[g, 0], walk[g, 1]
         for p in range(p_lone, p_first):
-            hit, bad = _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat)
+            hit, bad = _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, hist_dt)
             if bad >= 0:
                 return 0, bad
             touching[n_touch] = p
@@ -645,7 +806,7 @@ def _wall_forces(bodies, spheres, material, walls, lists, lim, hist_dt):
         for p in range(p_first, p_end):
             if gap[p] > closable:
                 continue
-            hit, bad = _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat)
+            hit, bad = _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, hist_dt)
             if bad >= 0:
                 return 0, bad
             touching[n_touch] = p

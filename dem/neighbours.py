@@ -38,6 +38,7 @@ from dem.conf import JIT_FLAGS
 from dem.contact import N_SUMS
 from dem.convex import SIMPLEX
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
+from dem.kept_contact import KEPT
 
 # Layout of a list's ``count``: pairs in use, groups in use (sphere pairs), room needed after a
 # failed build, groups of several pairs (sphere pairs).
@@ -88,6 +89,7 @@ class SpherePairs(NamedTuple):
     walk: np.ndarray  # (capacity + 1, 2) int32 first and end pair of each group of several pairs, then (n, n)
     by_gap: np.ndarray  # (capacity,) int32 in such a group's range: its pairs by their gap at the build
     gap: np.ndarray  # (capacity,) those gaps, in that order
+    kept: np.ndarray  # (capacity, KEPT) rounded pieces: a contact kept (dem/kept_contact.py)
 
 
 class WallPairs(NamedTuple):
@@ -109,6 +111,7 @@ class WallPairs(NamedTuple):
     walk: np.ndarray  # (capacity + 1, 2) int32 first and end pair of a body's run of several spheres; (n, n)
     gap: np.ndarray  # (capacity,) in such a run: each pair's gap at the build
     axis: np.ndarray  # (capacity, 3) rounded pieces: cached direction facet -> piece (any is valid; 0: none)
+    kept: np.ndarray  # (capacity, KEPT) rounded pieces: a contact kept (dem/kept_contact.py)
 
 
 class Neighbours(NamedTuple):
@@ -201,6 +204,7 @@ def _sphere_pairs(capacity: int, old: SpherePairs | None) -> SpherePairs:
         np.zeros((capacity + 1, 2), dtype=_INDEX),
         np.zeros(capacity, dtype=_INDEX),
         np.zeros(capacity),
+        np.zeros((capacity, KEPT)),
     )
 
 
@@ -224,6 +228,7 @@ def _wall_pairs(capacity: int, old: WallPairs | None) -> WallPairs:
         np.zeros((capacity + 1, 2), dtype=_INDEX),
         np.zeros(capacity),
         np.zeros((capacity, 3)),
+        np.zeros((capacity, KEPT)),
     )
 
 

@@ -381,7 +381,8 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work, axis=None):
     nz, cx, cy, cz, s_uu, s_uw, s_ww, is_face)``, delta the crowned overlap (the least crowned
     distance over the triangles, ``dem.crown``) and c its contact point. ``is_face``: the closest
     point of the facet is inside it (not on its boundary). When apart (delta <= 0), d may be a
-    lower bound of the distance rather than the distance.
+    lower bound of the distance rather than the distance, and -delta is then ra less that bound
+    (a lower bound of the margin, which ``dem.kept_contact`` keeps).
 
     ``axis`` (3,), optional: where the triangles are taken one by one and the core's distance is
     found, the unit direction of its closest points from the facet to the core is written there
@@ -394,8 +395,9 @@ def facet_geometry(va, a, ra, crown_a, tri, facet, work, axis=None):
     disp, normal, offset = facet.disp, facet.normal, facet.offset
     shift = normal[0] * disp[0] + normal[1] * disp[1] + normal[2] * disp[2]
     lo, hi, lowest = _extent(va, a, normal[0], normal[1], normal[2])
-    if lo - (offset + shift) > ra or (offset + shift) - hi > ra:
-        return -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    gap = max(lo - (offset + shift), (offset + shift) - hi)  # from the plane: a lower bound
+    if gap > ra:
+        return ra - gap, gap, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
     tol = 4.0 * crown_a[2]
     if lo > offset + shift:
         # The features that can touch (at most ra + tol above the lowest vertex) over the inside

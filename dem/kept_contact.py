@@ -1,0 +1,225 @@
+r"""A lasting contact of rounded pieces kept from its last evaluation while the pair has not moved
+(a persistent contact, as Bullet's manifold keeps its points), and a pair kept apart: the geometry of
+``dem.rounded_contact`` costs about a microsecond a touching pair, and in a resting pile (the
+feeder's 30 items between insertion and vibration, 50 touching pairs) it gives the same answer
+step after step.
+
+At a full evaluation the pair's relative pose q0 (B's position and rotation in A's frame) is kept
+with the result in the bodies' frames: the overlap delta0, the force direction e (in A's frame),
+the contact point c as a point of A and as a point of B, and the patch's moments. While the pose
+q has moved so little that every material point of B within ``reach`` of its centre has moved by
+at most
+
+    Delta = |p(q) - p(q0)| + reach ||R(q) - R(q0)||_F  <=  KEEP_FRACTION * delta0
+
+relative to A, the contact is B's point c pressing on A's plane through c across e:
+
+    delta(q) = delta0 + e . (c_B(q) - c_A(q)),
+
+with e turned with A, the force along e acting at c_B (B's copy of the point). That is a function
+of the relative pose, so the force it gives is exactly conservative and conserves linear and
+angular momentum, and its first derivatives at q0 are the full geometry's (e is the gradient of
+the crowned distance, ``dem.crown``). The bound: the crowned distance is a minimum over pairs of
+points fixed in the bodies of a 1-Lipschitz function of their positions, so it moves by at most
+Delta, and so does the plane's overlap: the kept overlap lies within 2 Delta <= 2 KEEP_FRACTION
+delta0 of the full geometry's (0.2 % of the overlap at most; the error is second order in the
+motion, far less in practice). A pair that moves more (any collision: 0.1 m/s is 3 um a step) is
+evaluated in full every step, as before; its row is not even written when the bodies' velocities
+say the next step would not be served either (``moves_beyond``), so the shaken feeder pays a
+comparison a contact. Nothing is served with ``KEEP_FRACTION = 0``, and the results are then those
+of the full geometry to the bit (``benchmarks/README.md``, session 21).
+
+A pair found apart is kept the same way, with minus its margin g (the crowned distance less the
+roundings, or a lower bound of it from the cheaper tests, ``dem.rounded_contact``) as delta0: it
+is apart while the motion is at most ``APART_FRACTION`` g, since the crowned distance moves by at
+most the motion. That serves the pairs of a pile whose cores are within the roundings but whose
+crowns keep them apart, which otherwise take GJK and the crowned contact every step; the answer,
+apart, is the one the full geometry would give.
+
+The kept row is keyed by the pair's two sphere rows, which never change for a piece
+(``Simulation.remove_body`` keeps indices), so a row left by another pair after a list rebuild is
+told apart, and a row of this pair left from any earlier step is as good as a fresh one if the
+pose test passes: the test compares poses, not times. Pure numba, inlined into the force pass.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from dem.conf import JIT_FLAGS
+
+# The largest material motion of B relative to A, as a fraction of the kept overlap, that the
+# kept geometry serves: its overlap is then within twice this fraction of the full geometry's.
+KEEP_FRACTION = 1e-3
+
+# A pair found apart by a margin g (a lower bound of its crowned distance less the roundings) is
+# served as apart while B moves relative to A by at most this fraction of g: the crowned distance
+# moves by at most the motion, and the half left covers the geometry's pairing of its minimiser
+# along the GJK normal (``dem.crown``), which is not the exact minimum.
+APART_FRACTION = 0.5
+
+# Columns of a kept row (``SpherePairs.kept``).
+K_I, K_J, K_DELTA, K_REACH = 0, 1, 2, 3  # sphere rows (+1; 0: empty), delta0, B's reach
+K_P = 4  # B's centre in A's frame (3)
+K_R = 7  # R_a^T R_b, row-major (9)
+K_E = 16  # force direction in A's frame (3)
+K_CA = 19  # contact point in A's frame (3)
+K_CB = 22  # contact point in B's frame (3)
+K_M = 25  # patch moments (3)
+K_FACE = 28  # a wall contact's ``is_face`` (1.0 or 0.0; dem.rounded_contact.facet_geometry)
+KEPT = 29
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def body_frame(rot, b):
+    """Body b's rotation as a row-major 9-tuple (the frames' argument below)."""
+    return (
+        rot[b, 0, 0], rot[b, 0, 1], rot[b, 0, 2],
+        rot[b, 1, 0], rot[b, 1, 1], rot[b, 1, 2],
+        rot[b, 2, 0], rot[b, 2, 1], rot[b, 2, 2],
+    )  # fmt: skip
+
+
+WALL_FRAME = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # walls translate, never turn
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _into(r, x, y, z):
+    """R^T (x, y, z): a world vector in the frame R (row-major 9-tuple)."""
+    return (
+        r[0] * x + r[3] * y + r[6] * z,
+        r[1] * x + r[4] * y + r[7] * z,
+        r[2] * x + r[5] * y + r[8] * z,
+    )
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _out_of(r, x, y, z):
+    """R (x, y, z): a vector of the frame R in the world."""
+    return (
+        r[0] * x + r[1] * y + r[2] * z,
+        r[3] * x + r[4] * y + r[5] * z,
+        r[6] * x + r[7] * y + r[8] * z,
+    )
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _allowed(delta0):
+    """How far B may move relative to A while row's result (overlap delta0 > 0, or apart by
+    -delta0 > 0) is served; 0 for an empty row."""
+    if delta0 > 0.0:
+        return KEEP_FRACTION * delta0
+    return -APART_FRACTION * delta0
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _keep_pose(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta):
+    """Row p's key, overlap (or minus the margin), reach and relative pose (``keep_contact``)."""
+    kept[p, K_I], kept[p, K_J], kept[p, K_DELTA], kept[p, K_REACH] = key[0], key[1], delta, reach
+    ra, rb = frame_a, frame_b
+    px, py, pz = _into(ra, origin_b[0] - origin_a[0], origin_b[1] - origin_a[1], origin_b[2] - origin_a[2])
+    kept[p, K_P], kept[p, K_P + 1], kept[p, K_P + 2] = px, py, pz
+    for r in range(3):
+        for c in range(3):
+            kept[p, K_R + 3 * r + c] = ra[r] * rb[c] + ra[3 + r] * rb[3 + c] + ra[6 + r] * rb[6 + c]
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def keep_apart(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta):
+    """Row p of ``kept`` := A and B (as ``keep_contact``) found apart, ``delta`` < 0 minus a lower
+    bound of their margin (the crowned distance less the roundings)."""
+    _keep_pose(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def keep_contact(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta, n, point, moment):
+    """Row p of ``kept`` := the contact just evaluated in full between A (rotation ``frame_a``,
+    a row-major 9-tuple, and centre ``origin_a``) and B: overlap ``delta``, force direction n
+    (B -> A), contact point and patch moments (3-tuples), with the relative pose; ``key`` (two
+    numbers) names the pair, ``reach`` bounds B's material points that matter (its core and
+    roundings) about ``origin_b``."""
+    _keep_pose(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
+    ra, rb = frame_a, frame_b
+    ex, ey, ez = _into(ra, n[0], n[1], n[2])
+    kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2] = ex, ey, ez
+    ax, ay, az = _into(ra, point[0] - origin_a[0], point[1] - origin_a[1], point[2] - origin_a[2])
+    kept[p, K_CA], kept[p, K_CA + 1], kept[p, K_CA + 2] = ax, ay, az
+    bx, by, bz = _into(rb, point[0] - origin_b[0], point[1] - origin_b[1], point[2] - origin_b[2])
+    kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2] = bx, by, bz
+    kept[p, K_M], kept[p, K_M + 1], kept[p, K_M + 2] = moment[0], moment[1], moment[2]
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def kept_contact(kept, p, key, frame_a, origin_a, frame_b, origin_b):
+    """(served, delta, nx, ny, nz, cx, cy, cz): the contact of A and B (as ``keep_contact``) from
+    row p of ``kept`` if the row is theirs (``key``) and their relative pose lies within the
+    bound of the module's docstring; delta < 0 (the rest zero) for a pair kept apart. Else served
+    is False and the rest is zero."""
+    delta0 = kept[p, K_DELTA]
+    if not (delta0 != 0.0 and kept[p, K_I] == key[0] and kept[p, K_J] == key[1]):
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    ra, rb = frame_a, frame_b
+    px, py, pz = _into(ra, origin_b[0] - origin_a[0], origin_b[1] - origin_a[1], origin_b[2] - origin_a[2])
+    moved = math.sqrt((px - kept[p, K_P]) ** 2 + (py - kept[p, K_P + 1]) ** 2 + (pz - kept[p, K_P + 2]) ** 2)
+    allowed = _allowed(delta0)
+    if moved > allowed:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    turned2 = 0.0
+    for r in range(3):
+        for c in range(3):
+            rr = ra[r] * rb[c] + ra[3 + r] * rb[3 + c] + ra[6 + r] * rb[6 + c]
+            turned2 += (rr - kept[p, K_R + 3 * r + c]) ** 2
+    if moved + kept[p, K_REACH] * math.sqrt(turned2) > allowed:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    if delta0 < 0.0:
+        return True, delta0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    nx, ny, nz = _out_of(ra, kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2])
+    ax, ay, az = _out_of(ra, kept[p, K_CA], kept[p, K_CA + 1], kept[p, K_CA + 2])
+    bx, by, bz = _out_of(rb, kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2])
+    ax, ay, az = ax + origin_a[0], ay + origin_a[1], az + origin_a[2]
+    bx, by, bz = bx + origin_b[0], by + origin_b[1], bz + origin_b[2]
+    delta = delta0 + nx * (bx - ax) + ny * (by - ay) + nz * (bz - az)
+    return True, delta, nx, ny, nz, bx, by, bz
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def moves_beyond(kept, p, step, vel_a, omega_a, origin_a, vel_b, omega_b, origin_b, reach, delta):
+    """Whether B's material points (within ``reach`` of ``origin_b``) move relative to A by more
+    than a row of ``delta`` would serve (``_allowed``) in one step of ``step``
+    seconds at the bodies' velocities and spins (3-tuples): then the next step would not be served
+    either, and row p is emptied instead of written (a collision's or the shaking's contacts pay
+    one comparison a step, not a kept row's writing). A cost decision only: whether a row is
+    served is decided by its pose test. ``step`` 0 (forces re-evaluated) never keeps."""
+    if step == 0.0:
+        kept[p, K_DELTA] = 0.0
+        return True
+    rx, ry, rz = origin_b[0] - origin_a[0], origin_b[1] - origin_a[1], origin_b[2] - origin_a[2]
+    # d/dt of B's centre in A's frame, and B's spin relative to A
+    vx = vel_b[0] - vel_a[0] - (omega_a[1] * rz - omega_a[2] * ry)
+    vy = vel_b[1] - vel_a[1] - (omega_a[2] * rx - omega_a[0] * rz)
+    vz = vel_b[2] - vel_a[2] - (omega_a[0] * ry - omega_a[1] * rx)
+    wx, wy, wz = omega_b[0] - omega_a[0], omega_b[1] - omega_a[1], omega_b[2] - omega_a[2]
+    speed = math.sqrt(vx * vx + vy * vy + vz * vz) + reach * math.sqrt(wx * wx + wy * wy + wz * wz)
+    if speed * step > _allowed(delta):
+        kept[p, K_DELTA] = 0.0
+        return True
+    return False
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def row_reach(kept, p, key, core, core_start, core_count, rounding, x, pos, b, i, extra):
+    """How far sphere row i's material points lie from its body b's centre, plus ``extra``: a
+    piece's farthest core vertex (body-frame, about the centre) plus its rounding, a plain
+    sphere's centre offset plus its radius (``rounding`` holds the radius). Read from row p of
+    ``kept`` if that row is the pair's (``key``): it depends on the rows alone."""
+    if kept[p, K_I] == key[0] and kept[p, K_J] == key[1] and kept[p, K_REACH] > 0.0:
+        return kept[p, K_REACH]
+    if core_count[i] > 0:
+        far2 = 0.0
+        for v in range(core_start[i], core_start[i] + core_count[i]):
+            far2 = max(far2, core[v, 0] ** 2 + core[v, 1] ** 2 + core[v, 2] ** 2)
+        return math.sqrt(far2) + rounding[i] + extra
+    off2 = (x[i, 0] - pos[b, 0]) ** 2 + (x[i, 1] - pos[b, 1]) ** 2 + (x[i, 2] - pos[b, 2]) ** 2
+    return math.sqrt(off2) + rounding[i] + extra
