@@ -16,6 +16,9 @@ A run's CPU time follows the path its pile takes (on one seed the polyhedra took
 rounding changed the path, benchmarks/README session 19), so give several ``--seed``: the
 representations run in turn for each seed (alternated, so the machine's load falls on both),
 and the last lines give each one's mean and range over the seeds and the ratio of the means.
+Each representation is first run once on the workers' tiny warm-up scene (``worker/warmup.py``),
+so that no timed run includes the kernels' compile (with a cold cache and a busy machine one
+seed took 155.7 s CPU where it takes 57 s warm, benchmarks/README session 21).
 """
 
 from __future__ import annotations
@@ -29,7 +32,8 @@ from collections import defaultdict
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 from dem.scenarios.feeder import run_feeder  # noqa: E402
-from dem.scenarios.feeder_config import load_feeder_config  # noqa: E402
+from dem.scenarios.feeder_config import FeederConfig, load_feeder_config  # noqa: E402
+from worker.warmup import WARMUP_PARAMS, WARMUP_SCENARIO  # noqa: E402
 
 CLOGGING = {"e": 0.2, "mu": 0.9}  # --clogging: items stay on the tray (also benchmarks.profile_engine)
 
@@ -57,6 +61,8 @@ def main() -> None:
     runs = [
         (rep, tol) for rep in args.representation for tol in (tolerances if rep == "polyhedron" else [None])
     ]
+    for representation in args.representation:
+        _warm(representation)
     cpu_by_run: dict[tuple[str, float | None, float], list[float]] = defaultdict(list)
     for seed in args.seed:
         for representation, tolerance in runs:
@@ -77,6 +83,15 @@ def main() -> None:
                 )
     if len(args.seed) > 1 or len(runs) > 1:
         _print_means(cpu_by_run, args.seed)
+
+
+def _warm(representation: str) -> None:
+    """The workers' warm-up scene with these items: the kernels compiled or loaded untimed."""
+    scene = {**WARMUP_SCENARIO, "items": {**WARMUP_SCENARIO["items"], "representation": representation}}
+    started = time.process_time()
+    run_feeder(FeederConfig.model_validate(scene), dict(WARMUP_PARAMS), seed=0)
+    seconds = time.process_time() - started
+    print(f"# {representation}: kernels warm in {seconds:.1f} s CPU (untimed)", flush=True)
 
 
 def _label(representation: str, tolerance: float | None) -> str:
