@@ -338,7 +338,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
             if served:
                 if delta > lim * min(rounding[i], rounding[j]):
                     return n_contacts, ba
-                _keep_piece_contact(pairs, grp_sum, g, single, p, delta, (nx, ny, nz), (cx, cy, cz))
+                _write_piece_contact(pairs, grp_sum, g, single, p, delta, (nx, ny, nz), (cx, cy, cz))
                 pairs.moment[p, 0] = pairs.kept[p, K_M]
                 pairs.moment[p, 1] = pairs.kept[p, K_M + 1]
                 pairs.moment[p, 2] = pairs.kept[p, K_M + 2]
@@ -400,7 +400,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
             # (r_b - r_a) / 2.
             shift = 0.5 * (rounding[j] - rounding[i])
             point = (cx + shift * nx, cy + shift * ny, cz + shift * nz)
-            _keep_piece_contact(pairs, grp_sum, g, single, p, delta, (nx, ny, nz), point)
+            _write_piece_contact(pairs, grp_sum, g, single, p, delta, (nx, ny, nz), point)
             pairs.moment[p, 0], pairs.moment[p, 1], pairs.moment[p, 2] = s_uu, s_uw, s_ww
             if still:
                 keep_contact(
@@ -477,7 +477,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _keep_piece_contact(pairs, grp_sum, g, single, p, delta, n, point):
+def _write_piece_contact(pairs, grp_sum, g, single, p, delta, n, point):
     """Writes a touching piece pair's overlap, normal and contact point for the second pass,
     and clears its group's sums if it is the group's only pair."""
     pairs.delta[p] = delta
@@ -550,7 +550,7 @@ def _wall_approach_rate(bodies, b, wall_v, point, delta, n):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _facet_contact(wall_pairs, p, delta, n, point):
+def _write_facet_contact(wall_pairs, p, delta, n, point):
     """Writes a touching piece-facet pair's overlap, normal (facet -> piece) and the patch centre
     on the facet, half the overlap outside the point where the force acts (``point``)."""
     wall_pairs.delta[p] = delta
@@ -605,7 +605,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
         if served and delta > 0.0:
             if delta > lim * spheres.rounding[i]:
                 return False, b
-            _facet_contact(wall_pairs, p, delta, (-nx, -ny, -nz), (cx, cy, cz))
+            _write_facet_contact(wall_pairs, p, delta, (-nx, -ny, -nz), (cx, cy, cz))
             for k in range(3):
                 wall_pairs.moment[p, k] = wall_pairs.kept[p, K_M + k]
             wp_keep[p] = wall_pairs.kept[p, K_FACE] != 0.0
