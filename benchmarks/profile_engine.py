@@ -10,10 +10,10 @@ Each figure is the least CPU time (``time.process_time``) of ``--repeats`` timin
 per step: on a shared machine the least is the figure least disturbed by the others' load.
 ``compute_forces`` is called with ``hist_dt = 0`` (forces re-evaluated without advancing the
 springs), so the state does not move between repeats; it also serves no contact from its kept
-row (``dem/kept_contact.py`` keeps none on a step of 0), so every figure is the full geometry's. The piece pairs that touch are also timed
-in the order a step takes them (GJK warm from the pair's simplex, the crown's feature hulls,
-the rest of the crowned contact, the patch's moments), each row adding one stage. Not a test:
-timings depend on the machine.
+row (``dem/kept_contact.py`` keeps none on a step of 0), so every figure is the full
+geometry's. The piece pairs that touch are also timed in the order a step takes them (GJK warm
+from the pair's simplex, the crown's feature hulls, the rest of the crowned contact, the patch's
+moments), each row adding one stage. Not a test: timings depend on the machine.
 """
 
 from __future__ import annotations
