@@ -115,22 +115,28 @@ def _allowed(delta0):
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _keep_pose(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta):
-    """Row p's key, overlap (or minus the margin), reach and relative pose (``keep_contact``)."""
-    kept[p, K_I], kept[p, K_J], kept[p, K_DELTA], kept[p, K_REACH] = key[0], key[1], delta, reach
-    ra, rb = frame_a, frame_b
-    px, py, pz = _into(ra, origin_b[0] - origin_a[0], origin_b[1] - origin_a[1], origin_b[2] - origin_a[2])
-    kept[p, K_P], kept[p, K_P + 1], kept[p, K_P + 2] = px, py, pz
-    for r in range(3):
-        for c in range(3):
-            kept[p, K_R + 3 * r + c] = ra[r] * rb[c] + ra[3 + r] * rb[3 + c] + ra[6 + r] * rb[6 + c]
+def _turn(ra, rb, k):
+    """Entry k (row-major) of R_a^T R_b: B's rotation in A's frame."""
+    r, c = k // 3, k % 3
+    return ra[r] * rb[c] + ra[3 + r] * rb[3 + c] + ra[6 + r] * rb[6 + c]
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def _shift(ra, origin_a, origin_b):
+    """B's centre in A's frame."""
+    return _into(ra, origin_b[0] - origin_a[0], origin_b[1] - origin_a[1], origin_b[2] - origin_a[2])
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
 def keep_apart(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta):
-    """Row p of ``kept`` := A and B (as ``keep_contact``) found apart, ``delta`` < 0 minus a lower
-    bound of their margin (the crowned distance less the roundings)."""
-    _keep_pose(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
+    """Row p of ``kept`` := its key, overlap ``delta`` (or minus a lower bound of the margin of a
+    pair found apart: the crowned distance less the roundings), reach and the relative pose of
+    A and B (as ``keep_contact``): all a pair kept apart needs."""
+    kept[p, K_I], kept[p, K_J], kept[p, K_DELTA], kept[p, K_REACH] = key[0], key[1], delta, reach
+    px, py, pz = _shift(frame_a, origin_a, origin_b)
+    kept[p, K_P], kept[p, K_P + 1], kept[p, K_P + 2] = px, py, pz
+    for k in range(9):
+        kept[p, K_R + k] = _turn(frame_a, frame_b, k)
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -140,7 +146,7 @@ def keep_contact(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delt
     (B -> A), contact point and patch moments (3-tuples), with the relative pose; ``key`` (two
     numbers) names the pair, ``reach`` bounds B's material points that matter (its core and
     roundings) about ``origin_b``."""
-    _keep_pose(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
+    keep_apart(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
     ra, rb = frame_a, frame_b
     ex, ey, ez = _into(ra, n[0], n[1], n[2])
     kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2] = ex, ey, ez
@@ -161,16 +167,14 @@ def kept_contact(kept, p, key, frame_a, origin_a, frame_b, origin_b):
     if not (delta0 != 0.0 and kept[p, K_I] == key[0] and kept[p, K_J] == key[1]):
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     ra, rb = frame_a, frame_b
-    px, py, pz = _into(ra, origin_b[0] - origin_a[0], origin_b[1] - origin_a[1], origin_b[2] - origin_a[2])
+    px, py, pz = _shift(ra, origin_a, origin_b)
     moved = math.sqrt((px - kept[p, K_P]) ** 2 + (py - kept[p, K_P + 1]) ** 2 + (pz - kept[p, K_P + 2]) ** 2)
     allowed = _allowed(delta0)
     if moved > allowed:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     turned2 = 0.0
-    for r in range(3):
-        for c in range(3):
-            rr = ra[r] * rb[c] + ra[3 + r] * rb[3 + c] + ra[6 + r] * rb[6 + c]
-            turned2 += (rr - kept[p, K_R + 3 * r + c]) ** 2
+    for k in range(9):
+        turned2 += (_turn(ra, rb, k) - kept[p, K_R + k]) ** 2
     if moved + kept[p, K_REACH] * math.sqrt(turned2) > allowed:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     if delta0 < 0.0:
