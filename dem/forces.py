@@ -332,8 +332,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
             served, delta, nx, ny, nz, cx, cy, cz = kept_contact(
                 pairs.kept, p, key, frame_a, origin_a, frame_b, origin_b
             )
-            if served and delta <= 0.0:  # kept apart
-                pp_hist[p, 0] = pp_hist[p, 1] = pp_hist[p, 2] = 0.0
+            if served and delta <= 0.0:  # kept apart: its spring was cleared when it was kept
                 continue
             if served:
                 if delta > lim * min(rounding[i], rounding[j]):
