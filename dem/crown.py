@@ -32,7 +32,62 @@ import math
 import numba
 
 from dem.conf import JIT_FLAGS, STEP_FLAGS
-from dem.convex import _clip, _copy_row, _parallel_segments, feature_hulls, plane_basis
+from dem.convex import _clip, _copy_row, _parallel_segments, feature_hulls, plane_basis, support
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def flat_tolerance(tol):
+    """How far a feature's vertices may lie off the plane fitted to them for it to count as flat
+    (``_height_fit``): the crowned minimiser, on that plane, lies within this of the core."""
+    return 1e-6 * tol + 1e-15
+
+
+# Frank-Wolfe steps of ``crown_floor``: 2 clear about 58 % of a shaken pile's pairs held apart by
+# their crowns alone, 3 about 62 %, 5 about 63 % (benchmarks/README.md, session 22).
+FLOOR_STEPS = 2
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
+def crown_floor(va, core, crown, q, nx, ny, nz, tol):
+    """A lower bound of a shape's share ``g(x) = n . (x - q) + phi(x)`` of the crowned distance
+    that ``crowned_contact`` returns, whatever its minimiser x: the shape (core ``core`` of the
+    vertex array va, crown ``crown`` about ``core.pos``) has its closest point q on its
+    supporting plane across the unit direction n, towards the other shape (it lies on the side
+    n . x >= n . q). ``crowned_contact``'s value is d + g_a(x) + g_b(y), x and y within
+    ``flat_tolerance`` of their cores; g is convex, so for any point x_k its tangent plane at
+    x_k, least at a vertex, bounds it from below on the core (Frank-Wolfe's bound), and
+    ``FLOOR_STEPS`` steps from q towards those vertices tighten it. At a corner or an edge across
+    n the bound is about the crown's height there (tens of micrometres on a phone), with two
+    support queries and no feature, hull or minimiser: the pairs of a shaken pile whose cores
+    lie within the roundings but whose crowns hold them apart (``dem.rounded_contact``). Across
+    a face, the centre's height over the plane gives the better bound (below)."""
+    kappa, kappa_h2 = crown[0], crown[1]
+    px, py, pz = core.pos
+    qx, qy, qz = q
+    eps = flat_tolerance(tol)
+    # Across a face the tangent planes lean to its far corners; there the centre's height over
+    # the plane bounds g: H = n . (p - q), x's height h = n . (x - q) >= -eps and
+    # |x - p| >= |H - h|, so g >= h + kappa (H - h)^2 - kappa h_c^2, which rises with h while
+    # 2 kappa (H - h) <= 1 (the crowns of dem/polyhedra.py: 2 kappa H <= 4 CROWN = 2e-3).
+    height = nx * (px - qx) + ny * (py - qy) + nz * (pz - qz)
+    best = -eps - kappa_h2
+    if 2.0 * kappa * (height + eps) <= 1.0:
+        best = -eps + kappa * (height + eps) ** 2 - kappa_h2
+    xx, xy, xz = q
+    off = 2.0 * eps  # x within eps of the core, and |grad g| <= 1 + 2 kappa |x - p| < 2
+    for _ in range(FLOOR_STEPS):
+        gx, gy, gz = nx + 2.0 * kappa * (xx - px), ny + 2.0 * kappa * (xy - py), nz + 2.0 * kappa * (xz - pz)
+        value = nx * (xx - qx) + ny * (xy - qy) + nz * (xz - qz)
+        value += kappa * ((xx - px) ** 2 + (xy - py) ** 2 + (xz - pz) ** 2) - kappa_h2
+        sx, sy, sz = support(va, core, -gx, -gy, -gz)
+        dx, dy, dz = sx - xx, sy - xy, sz - xz
+        slope = gx * dx + gy * dy + gz * dz  # <= 0: s is the core's least along the gradient
+        best = max(best, value + slope - off)
+        # the step along x -> s that minimises g: g(x + t d) = g(x) + t slope + kappa t^2 |d|^2
+        curve = kappa * (dx * dx + dy * dy + dz * dz)
+        t = 1.0 if curve <= 0.0 else min(1.0, -0.5 * slope / curve)
+        xx, xy, xz = xx + t * dx, xy + t * dy, xz + t * dz
+    return best
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -71,7 +126,7 @@ def _height_fit(pts, m, tol):
     alpha = mh - bu * mu - bw * mw
     flat = True
     for k in range(m):
-        if abs(alpha + bu * pts[k, 0] + bw * pts[k, 1] - (tol - pts[k, 2])) > 1e-6 * tol + 1e-15:
+        if abs(alpha + bu * pts[k, 0] + bw * pts[k, 1] - (tol - pts[k, 2])) > flat_tolerance(tol):
             flat = False
     return alpha, bu, bw, flat
 

@@ -56,7 +56,7 @@ from dem.convex import (
     plane_basis,
     support,
 )
-from dem.crown import crowned_contact
+from dem.crown import crown_floor, crowned_contact
 from dem.facets import closest_point_on_triangle
 
 IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # walls translate, never turn
@@ -64,6 +64,9 @@ NO_CROWN = (0.0, 0.0, 0.0)  # a wall facet is flat: kappa = 0, so phi = 0 on it 
 # pair_geometry's GJK-first path defers to the cached-axis test within this fraction of the reach
 # and the coordinates' size of touching (the test's rounding is a few 1e-16 of the coordinates)
 AXIS_BAND = 1e-9
+# _near_pair_geometry takes a pair as apart by its crowns' floor (dem.crown.crown_floor) only
+# beyond this fraction of the reach: the crowned distance's rounding is a few 1e-16 m
+CROWN_FLOOR_BAND = 1e-9
 
 
 class WallFacet(NamedTuple):
@@ -312,7 +315,9 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work, t
     pair's cached separating direction, from B to A, and ``simplex`` (``dem.convex.SIMPLEX``
     ints) its last GJK simplex, GJK's warm start; both updated here.
 
-    ``touching``: the pair touched at the last step (a hint; the result does not depend on it).
+    ``touching``: the pair touched at the last step (a hint: whether the pair touches, and its
+    contact if it does, do not depend on it; a pair apart may be told so by its crowns' floor
+    where it did not touch, and its margin is then a lower bound of the crowned one).
     The cached axis is then taken after GJK instead of before, and only where GJK leaves the
     cores apart or within the axis test's rounding of it (``AXIS_BAND``, far above it): cores
     closer than the reach are no further apart along any axis, so that test would have passed,
@@ -326,7 +331,7 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work, t
         kept = (simplex[0], simplex[1], simplex[2], simplex[3], simplex[4], simplex[5], simplex[6])
         near = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         if touching:
-            near = _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work)
+            near = _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work, True)
             # the axis test's rounding: a few 1e-16 of the coordinates
             scale = (
                 abs(a.pos[0]) + abs(a.pos[1]) + abs(a.pos[2]) + abs(b.pos[0]) + abs(b.pos[1]) + abs(b.pos[2])
@@ -345,14 +350,15 @@ def pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work, t
             return reach - gap, gap, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         if touching:
             return near
-    return _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work)
+    return _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work, touching)
 
 
 @numba.njit(**STEP_FLAGS)
-def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work):
+def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, work, touching):
     """``pair_geometry`` past the cached axis, which is inlined in its callers: most listed pairs
     end at that test, and each array passed to a compiled call costs an atomic reference count
-    up and down."""
+    up and down. ``touching``: as ``pair_geometry``'s; a pair that did not touch is first tried
+    against its crowns' floor."""
     reach = ra + rb
     s, lam = gjk_scratch(work)
     d, ax, ay, az, bx, by, bz = gjk_query(va, a, vb, b, simplex, s, lam)
@@ -363,6 +369,21 @@ def _near_pair_geometry(va, a, ra, crown_a, vb, b, rb, crown_b, axis, simplex, w
         return delta, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     tol = 4.0 * (crown_a[2] + crown_b[2])
     p_a, p_b = (ax, ay, az), (bx, by, bz)
+    if not touching:
+        # A pair that did not touch at the last step may be held apart by its crowns alone (a
+        # shaken pile's edges and corners): their floor (``dem.crown.crown_floor``) then says so
+        # without the crowned contact, and minus the margin returned is a lower bound of the
+        # crowned one (``dem.kept_contact`` keeps either). A pair that touched mostly still does.
+        nx, ny, nz = ax - bx, ay - by, az - bz
+        dn = math.sqrt(nx * nx + ny * ny + nz * nz)
+        nx, ny, nz = nx / dn, ny / dn, nz / dn
+        floor = (
+            dn
+            + crown_floor(va, a, crown_a, p_a, nx, ny, nz, tol)
+            + crown_floor(vb, b, crown_b, p_b, -nx, -ny, -nz, tol)
+        )
+        if floor - reach > CROWN_FLOOR_BAND * reach:
+            return reach - floor, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     crowned, xx, xy, xz, yx, yy, yz, ex, ey, ez = crowned_contact(
         va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work
     )

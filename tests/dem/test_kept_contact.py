@@ -197,7 +197,8 @@ def test_a_pair_kept_apart_is_served_only_while_it_cannot_touch(name, margin):
     rot0, pos0 = resting_pose(name)
     pos0 = pos0 + (0.0, 0.0, 20e-6 + margin)
     delta0, _, _ = full(rot0, pos0)
-    assert -1.5 * margin < delta0 < -0.5 * margin
+    # the margin found, or a lower bound of it (the crowns' floor, dem.crown.crown_floor)
+    assert -1.5 * margin < delta0 < 0.0
     kept = np.zeros((1, KEPT))
     keep_apart(kept, 0, (1.0, 2.0), REACH, EYE, (0.0,) * 3, tuple(rot0.ravel()), tuple(pos0), delta0)
     allowed = APART_FRACTION * -delta0
