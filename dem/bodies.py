@@ -13,7 +13,9 @@ bounding sphere (``radius`` its reach, ``offset`` its centre) serves the neighbo
 ``core_start``/``core_count`` point at the piece's core vertices in ``core`` (body frame), with
 ``rounding`` its r, and ``half`` the half sizes of the core's box about ``offset`` (body axes), a
 tighter bound than the sphere for the contact kernels' rejections. A clump's spheres have
-``core_count`` 0, ``rounding`` = ``radius`` and ``half`` 0.
+``core_count`` 0, ``rounding`` = ``radius`` and ``half`` 0. Every row has its ``reach``: how far
+its material points lie from the body's centre (a piece's farthest core vertex plus r, a sphere's
+offset plus radius), which bounds how far they move as the body turns (``dem/kept_contact.py``).
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ class SphereArrays(NamedTuple):
     core_count: np.ndarray  # (n,) int64 its number of core vertices; 0 for a clump's sphere
     crown: np.ndarray  # (n, 3) a piece's crown (dem.polyhedra.Polyhedron.crown); 0 for a sphere
     half: np.ndarray  # (n, 3) half sizes of a piece's core box about offset, body axes; 0 for a sphere
+    reach: np.ndarray  # (n,) farthest material point of the row from its body's centre
     core: np.ndarray  # (m, 3) every piece's core vertices, body frame
     eye: np.ndarray  # (3, 3) identity: the rotation of points given in world coordinates
     zero: np.ndarray  # (3,)
@@ -123,8 +126,8 @@ class Bodies:
 
 
 def sphere_rows(shape: Clump | Polyhedron):
-    """(radius, offset, rounding, core_start, core_count, crown, half) of a shape's sphere rows;
-    core_start is relative to the shape's own ``core``."""
+    """(radius, offset, rounding, core_start, core_count, crown, half, reach) of a shape's sphere
+    rows; core_start is relative to the shape's own ``core``."""
     if isinstance(shape, Polyhedron):
         n = shape.n_pieces
         pieces = [shape.piece(k) for k in range(n)]
@@ -136,11 +139,14 @@ def sphere_rows(shape: Clump | Polyhedron):
             np.asarray(shape.piece_count, dtype=np.int64),
             np.array([shape.crown(k) for k in range(n)]).reshape(n, 3),
             np.array([0.5 * (core.max(axis=0) - core.min(axis=0)) for core in pieces]).reshape(n, 3),
+            np.array([np.sqrt(np.max(np.sum(core**2, axis=1))) + shape.rounding for core in pieces]),
         )
     n = shape.n_spheres
     radius = np.asarray(shape.radius, dtype=np.float64)
+    offset = np.asarray(shape.offset, dtype=np.float64)
     zero = np.zeros(n, np.int64)
-    return radius, np.asarray(shape.offset), radius, zero, zero, np.zeros((n, 3)), np.zeros((n, 3))
+    reach = np.sqrt(np.sum(offset**2, axis=1)) + radius
+    return radius, offset, radius, zero, zero, np.zeros((n, 3)), np.zeros((n, 3)), reach
 
 
 class Spheres:
@@ -157,6 +163,7 @@ class Spheres:
         "_core_count",
         "_crown",
         "_half",
+        "_reach",
     )
 
     def __init__(self) -> None:
@@ -170,6 +177,7 @@ class Spheres:
         self._core_count = np.zeros(0, dtype=np.int64)
         self._crown = np.zeros((0, 3))
         self._half = np.zeros((0, 3))
+        self._reach = np.zeros(0)
         self._core = np.zeros((1, 3))  # one dummy row: never empty
         self._n_core = 0
         self._eye, self._zero, self._work = np.eye(3), np.zeros(3), scratch()
@@ -210,6 +218,7 @@ class Spheres:
             self.core_count,
             self._crown[: self.n],
             self._half[: self.n],
+            self._reach[: self.n],
             self._core,
             self._eye,
             self._zero,
@@ -217,7 +226,7 @@ class Spheres:
         )
 
     def append(self, body: int, shape: Clump | Polyhedron, rot: np.ndarray, position: np.ndarray) -> int:
-        radius, offset, rounding, core_start, core_count, crown, half = sphere_rows(shape)
+        radius, offset, rounding, core_start, core_count, crown, half, reach = sphere_rows(shape)
         k = len(radius)
         if self.n + k > len(self._radius):
             capacity = max(64, 2 * (self.n + k))
@@ -235,6 +244,7 @@ class Spheres:
         self._core_count[start : start + k] = core_count
         self._crown[start : start + k] = crown
         self._half[start : start + k] = half
+        self._reach[start : start + k] = reach
         if isinstance(shape, Polyhedron):
             vertices = np.asarray(shape.core, dtype=np.float64)
             if self._n_core + len(vertices) > len(self._core):

@@ -60,7 +60,6 @@ from dem.kept_contact import (
     keep_contact,
     kept_contact,
     moves_beyond,
-    row_reach,
 )
 from dem.materials import L_KT, L_MU, L_ZETA
 from dem.neighbours import G_CN, G_CT, G_KN, G_KT, G_MU, N_PAIRS, N_WALKS
@@ -371,10 +370,9 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                 pp_hist[p, 0] != 0.0 or pp_hist[p, 1] != 0.0 or pp_hist[p, 2] != 0.0,  # touched last step
             )
             # Kept for the next steps if the bodies move slowly enough for it to be served: a
-            # contact, or a pair apart by a margin (``dem/kept_contact.py``).
-            reach = row_reach(
-                pairs.kept, p, key, core, core_start, core_count, rounding, x, pos, bb, j, rounding[i]
-            )
+            # contact, or a pair apart by a margin (``dem/kept_contact.py``). B's points that
+            # matter lie within its row's reach and A's rounding of its centre.
+            reach = spheres.reach[j] + rounding[i]
             still = delta != 0.0 and not moves_beyond(
                 pairs.kept,
                 p,
@@ -660,20 +658,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
             )
             # Kept for the next steps if the piece moves slowly enough for it to be served (as
             # for piece pairs).
-            reach = row_reach(
-                wall_pairs.kept,
-                p,
-                key,
-                spheres.core,
-                spheres.core_start,
-                spheres.core_count,
-                spheres.rounding,
-                x,
-                pos,
-                b,
-                i,
-                0.0,
-            )
+            reach = spheres.reach[i]
             w_v = walls.vel[w]
             still = delta != 0.0 and not moves_beyond(
                 wall_pairs.kept,

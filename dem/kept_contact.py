@@ -61,7 +61,7 @@ KEEP_FRACTION = 1e-3
 APART_FRACTION = 0.5
 
 # Columns of a kept row (``SpherePairs.kept``).
-K_I, K_J, K_DELTA, K_REACH = 0, 1, 2, 3  # sphere rows (+1; 0: empty), delta0, B's reach
+K_I, K_J, K_DELTA, K_REACH = 0, 1, 2, 3  # sphere rows (+1; 0: empty), delta0, the reach it was kept with
 K_P = 4  # B's centre in A's frame (3)
 K_R = 7  # R_a^T R_b, row-major (9)
 K_E = 16  # force direction in A's frame (3)
@@ -210,20 +210,3 @@ def moves_beyond(kept, p, step, vel_a, omega_a, origin_a, vel_b, omega_b, origin
         kept[p, K_DELTA] = 0.0
         return True
     return False
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def row_reach(kept, p, key, core, core_start, core_count, rounding, x, pos, b, i, extra):
-    """How far sphere row i's material points lie from its body b's centre, plus ``extra``: a
-    piece's farthest core vertex (body-frame, about the centre) plus its rounding, a plain
-    sphere's centre offset plus its radius (``rounding`` holds the radius). Read from row p of
-    ``kept`` if that row is the pair's (``key``): it depends on the rows alone."""
-    if kept[p, K_I] == key[0] and kept[p, K_J] == key[1] and kept[p, K_REACH] > 0.0:
-        return kept[p, K_REACH]
-    if core_count[i] > 0:
-        far2 = 0.0
-        for v in range(core_start[i], core_start[i] + core_count[i]):
-            far2 = max(far2, core[v, 0] ** 2 + core[v, 1] ** 2 + core[v, 2] ** 2)
-        return math.sqrt(far2) + rounding[i] + extra
-    off2 = (x[i, 0] - pos[b, 0]) ** 2 + (x[i, 1] - pos[b, 1]) ** 2 + (x[i, 2] - pos[b, 2]) ** 2
-    return math.sqrt(off2) + rounding[i] + extra

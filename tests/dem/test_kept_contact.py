@@ -211,3 +211,32 @@ def test_a_pair_kept_apart_is_served_only_while_it_cannot_touch(name, margin):
             if served:
                 assert answer[1] == delta0
                 assert full(rot, pos)[0] < 0
+
+
+@pytest.mark.parametrize("representation", ["polyhedron", "clump"])
+def test_a_rows_reach_holds_every_material_point_of_it(representation):
+    # The kept rows' motion bound turns each row by its reach (dem/bodies.py): every point of a
+    # camera's pieces (slab and lens barrel: pieces whose centres are not the body's) or of its
+    # clump's spheres lies within it of the body's centre, and some point reaches it.
+    from dem.bodies import Spheres
+    from dem.scenarios.items import default_items
+
+    (camera,) = default_items(np.random.default_rng(3), {"camera": 1}, representation=representation)
+    spheres = Spheres()
+    spheres.append(0, camera.shape, np.eye(3), np.zeros(3))
+    rows = spheres.arrays()
+    rng = np.random.default_rng(8)
+    directions = rng.normal(size=(200, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    for i in range(len(rows.radius)):
+        if rows.core_count[i] > 0:
+            core = rows.core[rows.core_start[i] : rows.core_start[i] + rows.core_count[i]]
+            r = rows.rounding[i]
+        else:
+            core, r = rows.offset[i][None, :], rows.radius[i]
+        # the rounded surface: a core vertex plus r along any direction, the farthest at r along
+        # the vertex's own direction
+        points = (core[:, None, :] + r * directions[None, :, :]).reshape(-1, 3)
+        far = core + r * core / np.linalg.norm(core, axis=1)[:, None]
+        assert np.linalg.norm(points, axis=1).max() <= rows.reach[i] * (1 + 1e-12)
+        assert np.linalg.norm(far, axis=1).max() == pytest.approx(rows.reach[i], rel=1e-12)
