@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import redis
@@ -103,8 +103,8 @@ class _Routed:
                 trials.append(outcome)
         return trials
 
-    def in_flight(self) -> set[str]:
-        return self.executor.in_flight()
+    def in_flight(self, expected: Collection[str] = ()) -> set[str]:
+        return self.executor.in_flight(expected)
 
     def waiting(self) -> dict[str, str]:
         """Why trials of an engine wait (no worker has it), for the driver to store with them."""
@@ -314,7 +314,7 @@ class DriverLoop:
         if not in_db:
             return
         self._watch("")
-        lost = sorted(set(in_db) - self.executor.in_flight())
+        lost = sorted(set(in_db) - self.executor.in_flight(in_db))
         if lost:
             logger.info("re-submitting %d single simulations the executor does not know", len(lost))
             self.store.requeue_simulations(lost)

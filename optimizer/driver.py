@@ -483,12 +483,9 @@ class Driver:
             if states.get(spec.trial_id, TrialState.PENDING) is TrialState.PENDING
         ]
         if reconcile:
-            known_to_executor = self.executor.in_flight()
-            lost = [
-                spec
-                for spec in batch.specs
-                if states.get(spec.trial_id) in IN_FLIGHT and spec.trial_id not in known_to_executor
-            ]
+            expected = {spec.trial_id for spec in batch.specs if states.get(spec.trial_id) in IN_FLIGHT}
+            missing = expected - self.executor.in_flight(expected)
+            lost = [spec for spec in batch.specs if spec.trial_id in missing]
             if lost:
                 logger.info(
                     "study %s: re-submitting %d trials the executor does not know", study_id, len(lost)
@@ -509,7 +506,9 @@ class Driver:
         """Stop a study's queued and running trials as the executor holds them (the store may
         have marked them cancelled, or deleted the study) and forget what this driver knew of it;
         on resume, reconciliation sends its unfinished trials again."""
-        doomed = sorted(trial for trial in self.executor.in_flight() if is_trial_of(trial, study_id))
+        records = self._known[study_id].records if study_id in self._known else {}
+        expected = [tid for tid, record in records.items() if record.state in IN_FLIGHT]
+        doomed = sorted(trial for trial in self.executor.in_flight(expected) if is_trial_of(trial, study_id))
         if doomed:
             logger.info("study %s: withdrawing %d queued or running trials", study_id, len(doomed))
             self.executor.cancel(doomed)

@@ -14,7 +14,7 @@ import math
 import threading
 import uuid
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -216,7 +216,7 @@ class SyntheticExecutor:
             for spec in (self.queue.popleft() for _ in range(count))
         ]
 
-    def in_flight(self) -> set[str]:
+    def in_flight(self, expected: Collection[str] = ()) -> set[str]:
         return {spec.trial_id for spec in self.queue}
 
     def cancel(self, trial_ids: Sequence[str]) -> None:

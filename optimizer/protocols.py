@@ -8,7 +8,7 @@ seed. Its id is deterministic, so a re-sent result or a re-enqueued job maps to 
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol
@@ -119,8 +119,11 @@ class Executor(Protocol):
     def poll(self, timeout: float = 0.0) -> list[TrialOutcome]:
         """Finished trials since the last call, each returned exactly once; waits up to timeout."""
 
-    def in_flight(self) -> set[str]:
-        """Trial ids this executor still knows to be queued or running (for reconciliation)."""
+    def in_flight(self, expected: Collection[str] = ()) -> set[str]:
+        """Trial ids this executor still knows to be queued or running (for reconciliation).
+        ``expected``: those the caller holds as queued or running; each of them still in flight
+        is in the answer even if the executor cannot list it at that instant (RQ: a job a worker
+        is taking, between its queue and the started registry)."""
 
     def cancel(self, trial_ids: Sequence[str]) -> None:
         """Stop these trials if possible; their outcomes are then never reported."""

@@ -37,7 +37,7 @@ import os
 import signal
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import asdict, dataclass
 from multiprocessing import connection, get_context
 from pathlib import Path
@@ -156,7 +156,8 @@ class LocalPoolExecutor:
             if outcomes or time.monotonic() >= end:
                 return outcomes
 
-    def in_flight(self) -> set[str]:
+    def in_flight(self, expected: Collection[str] = ()) -> set[str]:
+        """Every trial is in this process's own lists, so ``expected`` adds nothing."""
         running = {slot.spec.trial_id for slot in self._slots if slot.spec is not None}
         return running | {spec.trial_id for spec in self._waiting}
 

@@ -27,6 +27,17 @@ Decisions, and why:
   reported, finished but not yet taken); a trial the database thinks is queued and that is not in
   it was lost (Redis flushed or restarted) and must be submitted again. ``maintain`` moves jobs
   of dead workers (no heartbeat) out of the started registry, into a retry or the failed registry.
+* **A job between two lists is still in flight.** A worker that listens on several queues (an
+  engine's own and the base queue, ``engine_queues``) takes a job with BLPOP, which removes it
+  from its queue, and only a few round trips later registers it as started: for those
+  milliseconds the job is in no list or registry. RQ moves a job atomically (BLMOVE into the
+  queue's intermediate list) only for a worker with a single queue, and Redis has no blocking
+  move from several lists. So the snapshot also reads, in the same transaction, the job status
+  of each trial the caller ``expected`` in flight: one still ``queued`` or ``started`` is in
+  flight, as ``submit`` would judge it. Without this, a reconciliation that fell in those
+  milliseconds took a trial a healthy worker was starting for lost, and counted an attempt the
+  trial never made. A worker killed within those milliseconds leaves its job ``queued`` in no
+  list; RQ does not recover such a job, and neither does this executor.
 
 Must not: touch the database or decide a trial's state; the driver and the store do that.
 """
@@ -36,7 +47,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -245,9 +256,10 @@ class RqExecutor:
             fresh.append(outcome)
         return fresh
 
-    def in_flight(self) -> set[str]:
-        """Trial ids Redis still holds as work to do or a result to take (one atomic snapshot)."""
-        queues = self._all_queues()
+    def in_flight(self, expected: Collection[str] = ()) -> set[str]:
+        """Trial ids Redis still holds as work to do or a result to take, and those of
+        ``expected`` whose job a worker is taking (one atomic snapshot; module docstring)."""
+        queues, studies, expected = self._all_queues(), sorted(self._watched), sorted(set(expected))
         with self._redis.pipeline(transaction=True) as pipe:
             for queue in queues:
                 pipe.lrange(queue.key, 0, -1)
@@ -255,19 +267,27 @@ class RqExecutor:
                 pipe.zrange(StartedJobRegistry(queue=queue).key, 0, -1)
                 pipe.zrange(queue.scheduled_job_registry.key, 0, -1)
                 pipe.zrange(FailedJobRegistry(queue=queue).key, 0, -1)
-            for study_id in sorted(self._watched):
+            for study_id in studies:
                 pipe.lrange(results_key(self._queue.name, study_id), 0, -1)
+            for trial in expected:
+                pipe.hget(Job.key_for(trial), "status")
             replies = pipe.execute()
+        listed = 5 * len(queues)
         ids: set[str] = set()
-        for index, reply in enumerate(replies[: 5 * len(queues)]):
+        for index, reply in enumerate(replies[:listed]):
             if index % 5 == 2:
                 # Started entries are "<job id>:<execution id>"; trial ids contain no colon.
                 ids.update(_text(entry).split(":", 1)[0] for entry in reply)
             else:
                 ids.update(_text(job_id) for job_id in reply)
-        replies = [None] * 5 + replies[5 * len(queues) :]
-        for reply in replies[5:]:
+        for reply in replies[listed : listed + len(studies)]:
             ids.update(json.loads(envelope)["trial_id"] for envelope in reply)
+        statuses = replies[listed + len(studies) :]
+        ids.update(
+            trial
+            for trial, status in zip(expected, statuses, strict=True)
+            if status and _text(status) in ACTIVE_STATES
+        )
         return ids
 
     def cancel(self, trial_ids: Sequence[str]) -> None:

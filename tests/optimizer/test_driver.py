@@ -143,6 +143,38 @@ def test_failed_simulations_are_penalised_and_the_study_goes_on(paper_definition
     assert progress.recommendation["params"]["E"] <= 1e8
 
 
+class TakingExecutor(SyntheticExecutor):
+    """Finishes nothing; ``take`` stands for a worker that has taken a trial off the queue and not
+    yet said so (an RQ worker of several queues, between its BLPOP and the started registry): the
+    executor cannot list that trial, but finds it when asked about it."""
+
+    def __init__(self):
+        super().__init__(per_poll=0)
+        self.taken: set[str] = set()
+
+    def take(self) -> str:
+        trial = self.queue.popleft().trial_id
+        self.taken.add(trial)
+        return trial
+
+    def in_flight(self, expected=()):
+        return super().in_flight() | (self.taken & set(expected))
+
+
+def test_a_trial_a_worker_is_taking_is_not_sent_again_by_reconciliation(small_definition):
+    store, executor = MemoryStore(), TakingExecutor()
+    study_id = start(store, small_definition)
+    driver = Driver(store, executor, reconcile_every_s=0)
+    driver.step(study_id, timeout=0)
+    taken = executor.take()
+
+    driver.step(study_id, timeout=0)
+
+    [record] = [record for record in store.trials(study_id) if record.spec.trial_id == taken]
+    assert executor.submitted.count(taken) == 1
+    assert (record.state, record.attempts) == (TrialState.QUEUED, 1)
+
+
 def test_pause_withdraws_work_and_resume_finishes_the_same_budget(small_definition):
     store, executor = MemoryStore(), SyntheticExecutor(per_poll=2)
     study_id = start(store, small_definition)

@@ -15,7 +15,7 @@ import time
 
 import pytest
 import redis
-from rq import get_current_job
+from rq import Queue, get_current_job
 from rq.job import Job
 from rq.serializers import JSONSerializer
 
@@ -28,6 +28,7 @@ from worker.rq_executor import (
     MIN_JOB_TIMEOUT_S,
     RedisQueueError,
     RqExecutor,
+    engine_queues,
     job_timeout,
 )
 from worker.rq_job import CancellationCheck, attempt, deliver, results_key
@@ -245,6 +246,34 @@ def test_in_flight_holds_queued_trials_and_untaken_results_and_nothing_after_a_f
     assert after_flush == set()
 
 
+def test_a_trial_a_worker_is_taking_from_one_of_several_queues_is_in_flight(executor, connection):
+    # A worker with an engine of its own listens on two queues; RQ then takes a job with BLPOP and
+    # registers it as started only a few round trips later: in between, the job is in no list.
+    # A reconciliation falling there must not take the trial for lost (an attempt it never made).
+    spec = make_spec("s1", 0)
+    executor.submit([spec])
+    worker_queues = [
+        Queue(name, connection=connection, serializer=JSONSerializer)
+        for name in engine_queues(QUEUE, ["numba", "liggghts"])
+    ]
+
+    job, _ = Queue.dequeue_any(worker_queues, None, connection=connection, serializer=JSONSerializer)
+
+    assert job.id == spec.trial_id and executor.queue.count == 0
+    assert executor.in_flight([spec.trial_id]) == {spec.trial_id}
+
+
+def test_an_expected_trial_whose_job_finished_or_was_flushed_is_not_in_flight(executor, connection):
+    done, flushed = make_spec("s1", 0), make_spec("s1", 1)
+    executor.submit([done])
+    run_worker_until_empty(connection)
+    executor.poll(timeout=1.0)  # its result taken: Redis holds nothing more to do or take for it
+    executor.submit([flushed])
+    connection.delete(Job.key_for(flushed.trial_id), executor.queue.key)  # a flush, of this trial only
+
+    assert executor.in_flight([done.trial_id, flushed.trial_id]) == set()
+
+
 def test_a_trial_lost_in_a_flush_can_be_submitted_again(executor, connection):
     spec = make_spec("s1", 0)
     executor.submit([spec])
@@ -355,8 +384,6 @@ def test_a_cancelled_simulation_is_never_reported_even_by_another_service(connec
 
 
 def test_a_trial_for_an_engine_no_worker_has_waits_and_says_so(executor, connection):
-    from worker.rq_executor import engine_queues
-
     spec = make_spec("s1", 0, engine="liggghts")
     plain = make_spec("s1", 1)
     executor.submit([spec, plain])
