@@ -324,9 +324,17 @@ class RqExecutor:
 
     def maintain(self) -> None:
         """Move jobs whose worker stopped sending heartbeats (killed, machine lost) to a retry,
-        or to the failed registry once retries are spent; ``poll`` then reports them."""
+        or to the failed registry once retries are spent; ``poll`` then reports them. Under RQ's
+        maintenance lock, as the workers clean their queues: a cleanup is not atomic, so two at
+        once would both retry a dead worker's job and it would run twice; a queue a worker is
+        cleaning now is left to it."""
         for queue in self._all_queues():
-            StartedJobRegistry(queue=queue).cleanup()
+            if not queue.acquire_maintenance_lock():
+                continue
+            try:
+                StartedJobRegistry(queue=queue).cleanup()
+            finally:
+                queue.release_maintenance_lock()
 
     def running(self) -> dict[str, str | None]:
         """Trial id -> name of the worker running it, for jobs a worker has started."""

@@ -17,6 +17,7 @@ import pytest
 import redis
 from rq import Queue, get_current_job
 from rq.job import Job
+from rq.registry import StartedJobRegistry
 from rq.serializers import JSONSerializer
 
 from dem.result import SimulationResult, SimulationStatus
@@ -272,6 +273,27 @@ def test_an_expected_trial_whose_job_finished_or_was_flushed_is_not_in_flight(ex
     connection.delete(Job.key_for(flushed.trial_id), executor.queue.key)  # a flush, of this trial only
 
     assert executor.in_flight([done.trial_id, flushed.trial_id]) == set()
+
+
+def test_a_dead_workers_job_is_retried_once_while_a_worker_may_clean_the_queue_too(executor, connection):
+    # A worker took the job and died: its started entry has expired. A worker cleaning the queue
+    # holds RQ's maintenance lock; the service's cleanup then leaves the queue to it (two
+    # cleanups at once would both retry the job, queueing it twice), and cleans it once it is free.
+    spec = make_spec("s1", 0)
+    executor.submit([spec])
+    queue = executor.queue
+    connection.lpop(queue.key)
+    started = StartedJobRegistry(queue=queue)
+    connection.zadd(started.key, {f"{spec.trial_id}:dead-worker-execution": 1})
+
+    assert queue.acquire_maintenance_lock()
+    executor.maintain()
+    assert started.get_job_ids(cleanup=False) == [spec.trial_id] and queue.job_ids == []
+
+    queue.release_maintenance_lock()
+    executor.maintain()
+    assert started.get_job_ids(cleanup=False) == [] and queue.job_ids == [spec.trial_id]
+    assert queue.acquire_maintenance_lock()  # released again for the workers
 
 
 def test_a_trial_lost_in_a_flush_can_be_submitted_again(executor, connection):
