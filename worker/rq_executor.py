@@ -37,7 +37,9 @@ Decisions, and why:
   flight, as ``submit`` would judge it. Without this, a reconciliation that fell in those
   milliseconds took a trial a healthy worker was starting for lost, and counted an attempt the
   trial never made. A worker killed within those milliseconds leaves its job ``queued`` in no
-  list; RQ does not recover such a job, and neither does this executor.
+  list, which RQ never recovers: a job seen between lists for longer than ``BETWEEN_LISTS_S``
+  is taken for lost, and ``submit`` enqueues it again although its status still says queued
+  (without that, its study would wait for it forever).
 
 Must not: touch the database or decide a trial's state; the driver and the store do that.
 """
@@ -88,6 +90,9 @@ ACTIVE_STATES = frozenset({JobStatus.QUEUED, JobStatus.STARTED, JobStatus.SCHEDU
 CANCEL_TTL_S = 24 * 3600
 # How many results one LPOP takes at most from a study's list.
 POP_BATCH = 500
+# A worker registers a job it took as started a few round trips after taking it; one in no list
+# or registry for longer than this was left there by a worker that died in between.
+BETWEEN_LISTS_S = 30.0
 
 
 class RedisQueueError(RuntimeError):
@@ -159,6 +164,8 @@ class RqExecutor:
         # Trials reported since they were last submitted: a late duplicate result is dropped.
         self._reported: set[str] = set()
         self._cancelled: set[str] = set()
+        self._between: dict[str, float] = {}  # trial -> when first seen in no list (module docstring)
+        self._orphaned: set[str] = set()  # seen there too long: submit enqueues them again
 
     @classmethod
     def from_url(cls, url: str, queue_name: str = "demcal", **kwargs: Any) -> RqExecutor:
@@ -190,7 +197,12 @@ class RqExecutor:
         self.watch(spec.study_id for spec in specs)
         statuses = self._job_statuses([spec.trial_id for spec in specs])
         fresh = longest_first(
-            [spec for spec in specs if statuses.get(spec.trial_id) not in ACTIVE_STATES], self._data_dir
+            [
+                spec
+                for spec in specs
+                if statuses.get(spec.trial_id) not in ACTIVE_STATES or spec.trial_id in self._orphaned
+            ],
+            self._data_dir,
         )
         if not fresh:
             return
@@ -228,6 +240,8 @@ class RqExecutor:
         for spec in fresh:
             self._reported.discard(spec.trial_id)
             self._cancelled.discard(spec.trial_id)
+            self._orphaned.discard(spec.trial_id)
+            self._between.pop(spec.trial_id, None)
         logger.info(
             "queued %d trials on %s (%d already in flight)",
             len(fresh),
@@ -283,11 +297,21 @@ class RqExecutor:
         for reply in replies[listed : listed + len(studies)]:
             ids.update(json.loads(envelope)["trial_id"] for envelope in reply)
         statuses = replies[listed + len(studies) :]
-        ids.update(
+        now = time.monotonic()
+        between = {
             trial
             for trial, status in zip(expected, statuses, strict=True)
-            if status and _text(status) in ACTIVE_STATES
-        )
+            if trial not in ids and status and _text(status) in ACTIVE_STATES
+        }
+        for trial in expected:  # other callers' trials keep their times
+            if trial in between:
+                since = self._between.setdefault(trial, now)
+                if now - since <= BETWEEN_LISTS_S:
+                    ids.add(trial)
+                else:
+                    self._orphaned.add(trial)
+            else:
+                self._between.pop(trial, None)
         return ids
 
     def cancel(self, trial_ids: Sequence[str]) -> None:

@@ -264,6 +264,40 @@ def test_a_trial_a_worker_is_taking_from_one_of_several_queues_is_in_flight(exec
     assert executor.in_flight([spec.trial_id]) == {spec.trial_id}
 
 
+def test_a_trial_left_between_lists_by_a_dead_worker_is_lost_and_sent_again(
+    executor, connection, monkeypatch
+):
+    # A worker took the job from one of its queues and died before registering it as started:
+    # the job stays "queued" in no list, which RQ never recovers. In flight while a live worker
+    # could still be registering it; past that, lost, and submit enqueues it again.
+    import worker.rq_executor as rq_executor
+
+    spec, other = make_spec("s1", 0), make_spec("s2", 0)
+    executor.submit([spec, other])
+    queues = [
+        Queue(name, connection=connection, serializer=JSONSerializer)
+        for name in engine_queues(QUEUE, ["numba", "liggghts"])
+    ]
+    for _ in range(2):
+        Queue.dequeue_any(queues, None, connection=connection, serializer=JSONSerializer)
+    assert executor.queue.count == 0 and executor.in_flight() == set()  # in no list
+
+    monkeypatch.setattr(rq_executor, "BETWEEN_LISTS_S", 0.2)
+    assert executor.in_flight([spec.trial_id]) == {spec.trial_id}
+    time.sleep(0.1)
+    assert executor.in_flight([other.trial_id]) == {other.trial_id}  # another caller's trial
+    time.sleep(0.15)
+    assert executor.in_flight([spec.trial_id]) == set()  # its time kept through the other call
+    assert executor.in_flight([other.trial_id]) == {other.trial_id}
+
+    executor.submit([spec, other])
+
+    assert executor.queue.job_ids == [spec.trial_id]
+    assert executor.in_flight([spec.trial_id]) == {spec.trial_id}
+    run_worker_until_empty(connection)
+    assert [outcome.trial_id for outcome in executor.poll(timeout=1.0)] == [spec.trial_id]
+
+
 def test_an_expected_trial_whose_job_finished_or_was_flushed_is_not_in_flight(executor, connection):
     done, flushed = make_spec("s1", 0), make_spec("s1", 1)
     executor.submit([done])
