@@ -139,7 +139,7 @@ def sphere_rows(shape: Clump | Polyhedron):
             np.asarray(shape.piece_count, dtype=np.int64),
             np.array([shape.crown(k) for k in range(n)]).reshape(n, 3),
             np.array([0.5 * (core.max(axis=0) - core.min(axis=0)) for core in pieces]).reshape(n, 3),
-            np.array([np.sqrt(np.max(np.sum(core**2, axis=1))) + shape.rounding for core in pieces]),
+            np.array([shape.core_reach(k) + shape.rounding for k in range(n)]),
         )
     n = shape.n_spheres
     radius = np.asarray(shape.radius, dtype=np.float64)

@@ -87,6 +87,10 @@ class Polyhedron:
         """Radius of piece k's bounding sphere about ``piece_centre(k)``, rounding included."""
         return float(np.linalg.norm(self.piece(k) - self.piece_centre(k), axis=1).max()) + self.rounding
 
+    def core_reach(self, k: int) -> float:
+        """Distance of piece k's furthest core vertex from the body's centre (rounding excluded)."""
+        return float(np.linalg.norm(self.piece(k), axis=1).max())
+
     def crown(self, k: int) -> tuple[float, float, float]:
         """Piece k's crown ``phi(x) = kappa (|x|^2 - h^2)`` about the centre of mass (``dem/crown.py``):
         ``(kappa, kappa h^2, kappa reach^2)``, kappa = 1 / (2 R) with R = size / (8 CROWN), h the
@@ -99,7 +103,7 @@ class Polyhedron:
             h = max(0.0, float(np.min(-planes[:, 3])))
         except QhullError:  # a flat core: no inside
             h = 0.0
-        reach = float(np.linalg.norm(core, axis=1).max())
+        reach = self.core_reach(k)
         return kappa, kappa * h * h, kappa * reach * reach
 
     @property
