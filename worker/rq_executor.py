@@ -164,8 +164,8 @@ class RqExecutor:
         # Trials reported since they were last submitted: a late duplicate result is dropped.
         self._reported: set[str] = set()
         self._cancelled: set[str] = set()
-        self._between: dict[str, float] = {}  # trial -> when first seen in no list (module docstring)
-        self._orphaned: set[str] = set()  # seen there too long: submit enqueues them again
+        # trial -> when first seen in no list (module docstring); past BETWEEN_LISTS_S, lost
+        self._between: dict[str, float] = {}
 
     @classmethod
     def from_url(cls, url: str, queue_name: str = "demcal", **kwargs: Any) -> RqExecutor:
@@ -200,7 +200,7 @@ class RqExecutor:
             [
                 spec
                 for spec in specs
-                if statuses.get(spec.trial_id) not in ACTIVE_STATES or spec.trial_id in self._orphaned
+                if statuses.get(spec.trial_id) not in ACTIVE_STATES or self._left_between(spec.trial_id)
             ],
             self._data_dir,
         )
@@ -240,7 +240,6 @@ class RqExecutor:
         for spec in fresh:
             self._reported.discard(spec.trial_id)
             self._cancelled.discard(spec.trial_id)
-            self._orphaned.discard(spec.trial_id)
             self._between.pop(spec.trial_id, None)
         logger.info(
             "queued %d trials on %s (%d already in flight)",
@@ -298,21 +297,21 @@ class RqExecutor:
             ids.update(json.loads(envelope)["trial_id"] for envelope in reply)
         statuses = replies[listed + len(studies) :]
         now = time.monotonic()
-        between = {
-            trial
-            for trial, status in zip(expected, statuses, strict=True)
-            if trial not in ids and status and _text(status) in ACTIVE_STATES
-        }
-        for trial in expected:  # other callers' trials keep their times
-            if trial in between:
-                since = self._between.setdefault(trial, now)
-                if now - since <= BETWEEN_LISTS_S:
-                    ids.add(trial)
-                else:
-                    self._orphaned.add(trial)
-            else:
+        for trial, status in zip(expected, statuses, strict=True):  # others' trials keep their times
+            if trial in ids or not (status and _text(status) in ACTIVE_STATES):
                 self._between.pop(trial, None)
+                continue
+            self._between.setdefault(trial, now)
+            if not self._left_between(trial, now):
+                ids.add(trial)
         return ids
+
+    def _left_between(self, trial: str, now: float | None = None) -> bool:
+        """Whether the trial's job has been in no list for longer than ``BETWEEN_LISTS_S``: a
+        worker died taking it, and it is lost (module docstring)."""
+        since = self._between.get(trial)
+        now = time.monotonic() if now is None else now
+        return since is not None and now - since > BETWEEN_LISTS_S
 
     def cancel(self, trial_ids: Sequence[str]) -> None:
         """Remove queued jobs and ask workers to stop running ones (between two chunks of the
