@@ -36,6 +36,13 @@ from dem.convex import _clip, _copy_row, _parallel_segments, feature_hulls, plan
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
+def crown_radius(crown):
+    """R = 1 / (2 kappa) of a crown (the radius of the sphere its face osculates where the
+    minimiser lies inside the face); 0 for no crown (a plain sphere's point, a wall's plane)."""
+    return 0.5 / crown[0] if crown[0] > 0.0 else 0.0
+
+
+@numba.njit(inline="always", **JIT_FLAGS)
 def flat_tolerance(tol):
     """How far a feature's vertices may lie off the plane fitted to them for it to count as flat
     (``_height_fit``): the crowned minimiser, on that plane, lies within this of the core."""

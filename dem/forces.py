@@ -50,6 +50,7 @@ from dem.contact import (
     sphere_contact_force,
 )
 from dem.convex import at_point, place_body
+from dem.crown import crown_radius
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.kept_contact import (
     K_FACE,
@@ -413,6 +414,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                     (nx, ny, nz),
                     point,
                     (s_uu, s_uw, s_ww),
+                    (crown_radius(_crown(crown, i)), crown_radius(_crown(crown, j))),
                 )
             _add_sums(grp_sum, g, delta, _approach_rate(bodies, ba, bb, point, (nx, ny, nz)))
             n_deferred += 1
@@ -704,6 +706,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
                         (-nx, -ny, -nz),
                         point,
                         (s_uu, s_uw, s_ww),
+                        (0.0, crown_radius(_crown(spheres.crown, i))),
                     )
                     wall_pairs.kept[p, K_FACE] = 1.0 if is_face else 0.0
                 return True, -1

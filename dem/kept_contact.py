@@ -12,18 +12,30 @@ at most
 
     Delta = |p(q) - p(q0)| + reach ||R(q) - R(q0)||_F  <=  KEEP_FRACTION * delta0
 
-relative to A, the contact is B's point c pressing on A's plane through c across e:
+relative to A, the contact is the two surfaces' osculating spheres at c: a crowned piece's of
+radius R = 1 / (2 kappa) (``dem.crown.crown_radius``) about the centre C = c + R e (A) or c - R e
+(B), fixed in its body; a side without a crown has R = 0 (a plain sphere's point; a wall, A, is
+the plane through c across e, turned with it). Two pieces, and a wall with a piece:
 
-    delta(q) = delta0 + e . (c_B(q) - c_A(q)),
+    delta(q) = delta0 + R_a + R_b - |C_a(q) - C_b(q)|,    delta(q) = delta0 + e . (C_b(q) - c_A) + R_b,
 
-with e turned with A, the force along e acting at c_B (B's copy of the point). That is a function
+the force along C_a - C_b (along e) acting where that line meets B's sphere. That is a function
 of the relative pose, so the force it gives is exactly conservative and conserves linear and
-angular momentum, and its first derivatives at q0 are the full geometry's (e is the gradient of
-the crowned distance, ``dem.crown``). The bound: the crowned distance is a minimum over pairs of
-points fixed in the bodies of a 1-Lipschitz function of their positions, so it moves by at most
-Delta, and so does the plane's overlap: the kept overlap lies within 2 Delta <= 2 KEEP_FRACTION
-delta0 of the full geometry's (0.2 % of the overlap at most; the error is second order in the
-motion, far less in practice). A pair that moves more (any collision: 0.1 m/s is 3 um a step) is
+angular momentum, and its value and first derivatives at q0 are the full geometry's (e is the
+gradient of the crowned distance, ``dem.crown``; the line of the centres passes through c along
+e). Why spheres and not B's point on A's plane (session 21): a face resting on a face is held
+in its tilt by the crown's rolling, its contact moving by R per unit of tilt (about 2 m on a
+phone); a point fixed in the body lacks that stiffness, and each refresh started a new
+linearisation, so a box resting on a box kept rocking at 1e-6 to 1e-4 rad/s, in a cycle the
+kept rows fed. The spheres carry the rolling to second order and the box comes to rest (1e-14
+rad/s, as without kept rows; ``benchmarks/README.md``, session 23). At an edge or a corner,
+whose core is sharp, the crown's sphere adds a rolling of the same second order.
+
+The bound: the crowned distance is a minimum over pairs of points fixed in the bodies of a
+1-Lipschitz function of their positions, so it moves by at most Delta; C_b lies within reach +
+R_b of B's centre, so the kept overlap moves by at most Delta + R_b ||R(q) - R(q0)||_F, and the
+two differ by at most their sum (the error is second order in the motion, far less in practice:
+at most 2e-6 of the overlap in the feeder's resting pile). A pair that moves more (any collision: 0.1 m/s is 3 um a step) is
 evaluated in full every step, as before; its row is not even written when the bodies' velocities
 say the next step would not be served either (``moves_beyond``), so the shaken feeder pays a
 comparison a contact. Nothing is served with ``KEEP_FRACTION = 0``, and the results are then those
@@ -69,7 +81,8 @@ K_CA = 19  # contact point in A's frame (3)
 K_CB = 22  # contact point in B's frame (3)
 K_M = 25  # patch moments (3)
 K_FACE = 28  # a wall contact's ``is_face`` (1.0 or 0.0; dem.rounded_contact.facet_geometry)
-KEPT = 29
+K_RA, K_RB = 29, 30  # the osculating spheres' radii R_a, R_b (K_CA, K_CB then hold their centres)
+KEPT = 31
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -140,19 +153,25 @@ def keep_apart(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def keep_contact(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta, n, point, moment):
+def keep_contact(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta, n, point, moment, radii):
     """Row p of ``kept`` := the contact just evaluated in full between A (rotation ``frame_a``,
     a row-major 9-tuple, and centre ``origin_a``) and B: overlap ``delta``, force direction n
     (B -> A), contact point and patch moments (3-tuples), with the relative pose; ``key`` (two
     numbers) names the pair, ``reach`` bounds B's material points that matter (its core and
-    roundings) about ``origin_b``."""
+    roundings) about ``origin_b``; ``radii`` = (R_a, R_b) of the osculating spheres (the module's
+    docstring; R_a 0 for a wall)."""
     keep_apart(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
     ra, rb = frame_a, frame_b
-    ex, ey, ez = _into(ra, n[0], n[1], n[2])
+    nx, ny, nz = n
+    ex, ey, ez = _into(ra, nx, ny, nz)
     kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2] = ex, ey, ez
-    ax, ay, az = _into(ra, point[0] - origin_a[0], point[1] - origin_a[1], point[2] - origin_a[2])
+    r_a, r_b = radii
+    kept[p, K_RA], kept[p, K_RB] = r_a, r_b
+    cx, cy, cz = point[0] + r_a * nx, point[1] + r_a * ny, point[2] + r_a * nz
+    ax, ay, az = _into(ra, cx - origin_a[0], cy - origin_a[1], cz - origin_a[2])
     kept[p, K_CA], kept[p, K_CA + 1], kept[p, K_CA + 2] = ax, ay, az
-    bx, by, bz = _into(rb, point[0] - origin_b[0], point[1] - origin_b[1], point[2] - origin_b[2])
+    cx, cy, cz = point[0] - r_b * nx, point[1] - r_b * ny, point[2] - r_b * nz
+    bx, by, bz = _into(rb, cx - origin_b[0], cy - origin_b[1], cz - origin_b[2])
     kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2] = bx, by, bz
     kept[p, K_M], kept[p, K_M + 1], kept[p, K_M + 2] = moment[0], moment[1], moment[2]
 
@@ -184,8 +203,15 @@ def kept_contact(kept, p, key, frame_a, origin_a, frame_b, origin_b):
     bx, by, bz = _out_of(rb, kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2])
     ax, ay, az = ax + origin_a[0], ay + origin_a[1], az + origin_a[2]
     bx, by, bz = bx + origin_b[0], by + origin_b[1], bz + origin_b[2]
-    delta = delta0 + nx * (bx - ax) + ny * (by - ay) + nz * (bz - az)
-    return True, delta, nx, ny, nz, bx, by, bz
+    r_a, r_b = kept[p, K_RA], kept[p, K_RB]
+    if r_a > 0.0:  # two spheres (B's may be a point)
+        vx, vy, vz = ax - bx, ay - by, az - bz
+        length = math.sqrt(vx * vx + vy * vy + vz * vz)
+        nx, ny, nz = vx / length, vy / length, vz / length
+        delta = delta0 + r_a + r_b - length
+    else:  # A's plane, B's sphere (or point)
+        delta = delta0 + nx * (bx - ax) + ny * (by - ay) + nz * (bz - az) + r_b
+    return True, delta, nx, ny, nz, bx + r_b * nx, by + r_b * ny, bz + r_b * nz
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
