@@ -35,11 +35,12 @@ The bound: the crowned distance is a minimum over pairs of points fixed in the b
 1-Lipschitz function of their positions, so it moves by at most Delta; C_b lies within reach +
 R_b of B's centre, so the kept overlap moves by at most Delta + R_b ||R(q) - R(q0)||_F, and the
 two differ by at most their sum (the error is second order in the motion, far less in practice:
-at most 2e-6 of the overlap in the feeder's resting pile). A pair that moves more (any collision: 0.1 m/s is 3 um a step) is
-evaluated in full every step, as before; its row is not even written when the bodies' velocities
-say the next step would not be served either (``moves_beyond``), so the shaken feeder pays a
-comparison a contact. Nothing is served with ``KEEP_FRACTION = 0``, and the results are then those
-of the full geometry to the bit (``benchmarks/README.md``, session 21).
+at most 2e-6 of the overlap in the feeder's resting pile). A pair that moves more (any
+collision: 0.1 m/s is 3 um a step) is evaluated in full every step, as before; its row is not
+even written when the bodies' velocities say the next step would not be served either
+(``moves_beyond``), so the shaken feeder pays a comparison a contact. Nothing is served with
+``KEEP_FRACTION = 0``, and the results are then those of the full geometry to the bit
+(``benchmarks/README.md``, session 21).
 
 A pair found apart is kept the same way, with minus its margin g (the crowned distance less the
 roundings, or a lower bound of it from the cheaper tests, ``dem.rounded_contact``) as delta0: it

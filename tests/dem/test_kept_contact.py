@@ -64,9 +64,8 @@ def kept_row(rot, pos):
     assert delta > 0
     kept = np.zeros((1, KEPT))
     frame, origin = tuple(rot.ravel()), tuple(pos)
-    keep_contact(
-        kept, 0, (1.0, 2.0), REACH, EYE, (0.0,) * 3, frame, origin, delta, tuple(n), tuple(point), (0.0,) * 3, RADII
-    )
+    n, point, moments = tuple(n), tuple(point), (0.0,) * 3
+    keep_contact(kept, 0, (1.0, 2.0), REACH, EYE, (0.0,) * 3, frame, origin, delta, n, point, moments, RADII)
     return kept, delta
 
 
