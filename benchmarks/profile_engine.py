@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 from dem.conf import JIT_FLAGS  # noqa: E402
 from dem.convex import feature_hulls, gjk_distance, gjk_query, gjk_scratch, patch_moments, place  # noqa: E402
 from dem.crown import crowned_contact  # noqa: E402
-from dem.forces import _crown, _sphere_pair_forces, _wall_forces, compute_forces  # noqa: E402
+from dem.forces import _row, _sphere_pair_forces, _wall_forces, compute_forces  # noqa: E402
 from dem.integrate import drift, kick, live_rows, update_omega, update_spheres  # noqa: E402
 from dem.neighbours import N_PAIRS, rebuild_lists  # noqa: E402
 from dem.rounded_contact import WallFacet, facet_geometry, pair_geometry  # noqa: E402
@@ -105,11 +105,11 @@ def _rounded_pair_geometry(bodies, spheres, pairs, which):
                 va,
                 a,
                 ra,
-                _crown(spheres.crown, i),
+                _row(spheres.crown, i),
                 vb,
                 b,
                 rb,
-                _crown(spheres.crown, j),
+                _row(spheres.crown, j),
                 axis,
                 simplex,
                 spheres.work,
@@ -123,10 +123,10 @@ def _rounded_pair_geometry(bodies, spheres, pairs, which):
             r = crowned_contact(
                 va,
                 a,
-                _crown(spheres.crown, i),
+                _row(spheres.crown, i),
                 vb,
                 b,
-                _crown(spheres.crown, j),
+                _row(spheres.crown, j),
                 (ax, ay, az),
                 (bx, by, bz),
                 tol,
@@ -155,11 +155,11 @@ def _touching_piece_pairs(bodies, spheres, pairs):
             spheres.core,
             a,
             spheres.rounding[i],
-            _crown(spheres.crown, i),
+            _row(spheres.crown, i),
             spheres.core,
             b,
             spheres.rounding[j],
-            _crown(spheres.crown, j),
+            _row(spheres.crown, j),
             axis,
             simplex,
             spheres.work,
@@ -189,7 +189,7 @@ def _touching_stages(bodies, spheres, pairs, touching, stages):
             continue
         d, ax, ay, az, bx, by, bz = gjk_query(spheres.core, a, spheres.core, b, simplex, s, lam)
         total += d
-        crown_a, crown_b = _crown(spheres.crown, i), _crown(spheres.crown, j)
+        crown_a, crown_b = _row(spheres.crown, i), _row(spheres.crown, j)
         tol = 4.0 * (crown_a[2] + crown_b[2])
         if stages == 2:
             n = ((ax - bx) / d, (ay - by) / d, (az - bz) / d)
@@ -230,7 +230,7 @@ def _rounded_facet_geometry(bodies, spheres, walls, wall_pairs):
             facets.offset[f],
         )
         r = facet_geometry(
-            spheres.core, core, spheres.rounding[i], _crown(spheres.crown, i), tri_flat, facet, spheres.work
+            spheres.core, core, spheres.rounding[i], _row(spheres.crown, i), tri_flat, facet, spheres.work
         )
         total += r[0]
     return total

@@ -327,7 +327,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
             # its last full evaluation (``dem/kept_contact.py``): a resting pile's pairs.
             ba, bb = sbody[i], sbody[j]
             frame_a, frame_b = body_frame(rot, ba), body_frame(rot, bb)
-            origin_a, origin_b = (pos[ba, 0], pos[ba, 1], pos[ba, 2]), (pos[bb, 0], pos[bb, 1], pos[bb, 2])
+            origin_a, origin_b = _row(pos, ba), _row(pos, bb)
             key = (i + 1.0, j + 1.0)
             served, delta, nx, ny, nz, cx, cy, cz = kept_contact(
                 pairs.kept, p, key, frame_a, origin_a, frame_b, origin_b
@@ -360,11 +360,11 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                 va,
                 a,
                 rounding[i],
-                _crown(crown, i),
+                _row(crown, i),
                 vb,
                 b,
                 rounding[j],
-                _crown(crown, j),
+                _row(crown, j),
                 pairs.axis[p],
                 pairs.simplex[p],
                 work,
@@ -378,11 +378,11 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                 pairs.kept,
                 p,
                 hist_dt,
-                (vel[ba, 0], vel[ba, 1], vel[ba, 2]),
-                (omega[ba, 0], omega[ba, 1], omega[ba, 2]),
+                _row(vel, ba),
+                _row(omega, ba),
                 origin_a,
-                (vel[bb, 0], vel[bb, 1], vel[bb, 2]),
-                (omega[bb, 0], omega[bb, 1], omega[bb, 2]),
+                _row(vel, bb),
+                _row(omega, bb),
                 origin_b,
                 reach,
                 delta,
@@ -414,7 +414,7 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                     (nx, ny, nz),
                     point,
                     (s_uu, s_uw, s_ww),
-                    (crown_radius(_crown(crown, i)), crown_radius(_crown(crown, j))),
+                    (crown_radius(_row(crown, i)), crown_radius(_row(crown, j))),
                 )
             _add_sums(grp_sum, g, delta, _approach_rate(bodies, ba, bb, point, (nx, ny, nz)))
             n_deferred += 1
@@ -530,9 +530,10 @@ def _sphere_pair_force(p, g, single, rows, n, delta, bodies, spheres, pairs, his
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _crown(crown, i):
-    """Row i of the spheres' crown table as a 3-tuple (``dem/crown.py``)."""
-    return crown[i, 0], crown[i, 1], crown[i, 2]
+def _row(table, i):
+    """Row i of an (n, 3) table as a 3-tuple: a body's centre, velocity or spin, a sphere row's
+    crown (``dem/crown.py``)."""
+    return table[i, 0], table[i, 1], table[i, 2]
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -593,10 +594,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
         # last full evaluation (``dem/kept_contact.py``: A the wall, B the piece, so the kept
         # direction is the facet's normal turned round): a resting pile on the tray's floor.
         frame_b = body_frame(bodies.rot, b)
-        origin_a, origin_b = (
-            (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
-            (pos[b, 0], pos[b, 1], pos[b, 2]),
-        )
+        origin_a, origin_b = _row(wall_disp, w), _row(pos, b)
         key = (i + 1.0, f + 1.0)
         served, delta, nx, ny, nz, cx, cy, cz = kept_contact(
             wall_pairs.kept, p, key, WALL_FRAME, origin_a, frame_b, origin_b
@@ -634,7 +632,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
                 tri_flat,
                 facets.tri_start[f],
                 facets.tri_count[f],
-                (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
+                _row(wall_disp, w),
                 sx,
                 sy,
                 sz,
@@ -644,7 +642,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
             facet = WallFacet(
                 facets.tri_start[f],
                 facets.tri_count[f],
-                (wall_disp[w, 0], wall_disp[w, 1], wall_disp[w, 2]),
+                _row(wall_disp, w),
                 (normal[f, 0], normal[f, 1], normal[f, 2]),
                 facets.offset[f],
             )
@@ -652,7 +650,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
                 spheres.core,
                 core,
                 spheres.rounding[i],
-                _crown(spheres.crown, i),
+                _row(spheres.crown, i),
                 tri_flat,
                 facet,
                 spheres.work,
@@ -661,16 +659,15 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
             # Kept for the next steps if the piece moves slowly enough for it to be served (as
             # for piece pairs).
             reach = spheres.reach[i]
-            w_v = walls.vel[w]
             still = delta != 0.0 and not moves_beyond(
                 wall_pairs.kept,
                 p,
                 step,
-                (w_v[0], w_v[1], w_v[2]),
+                _row(walls.vel, w),
                 (0.0, 0.0, 0.0),
                 origin_a,
-                (bodies.vel[b, 0], bodies.vel[b, 1], bodies.vel[b, 2]),
-                (bodies.omega[b, 0], bodies.omega[b, 1], bodies.omega[b, 2]),
+                _row(bodies.vel, b),
+                _row(bodies.omega, b),
                 origin_b,
                 reach,
                 delta,
@@ -706,7 +703,7 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
                         (-nx, -ny, -nz),
                         point,
                         (s_uu, s_uw, s_ww),
-                        (0.0, crown_radius(_crown(spheres.crown, i))),
+                        (0.0, crown_radius(_row(spheres.crown, i))),
                     )
                     wall_pairs.kept[p, K_FACE] = 1.0 if is_face else 0.0
                 return True, -1
@@ -898,7 +895,7 @@ def _wall_forces(bodies, spheres, material, walls, lists, lim, hist_dt):
             _push(force, torque, b, fx, fy, fz, rax, ray, raz)
             if spheres.core_count[wp_i[a]] > 0:
                 moment = (wall_pairs.moment[a, 0], wall_pairs.moment[a, 1], wall_pairs.moment[a, 2])
-                spin = (omega[b, 0], omega[b, 1], omega[b, 2])
+                spin = _row(omega, b)
                 tx, ty, tz = patch_damping(
                     (nx, ny, nz), moment, spin, weight * law.c_n, weight * law.c_t, law.mu * weight * f_pair
                 )
