@@ -14,8 +14,9 @@ at most
 
 relative to A, the contact is the two surfaces' osculating spheres at c: a crowned piece's of
 radius R = 1 / (2 kappa) (``dem.crown.crown_radius``) about the centre C = c + R e (A) or c - R e
-(B), fixed in its body; a side without a crown has R = 0 (a plain sphere's point; a wall, A, is
-the plane through c across e, turned with it). Two pieces, and a wall with a piece:
+(B), fixed in its body. A side without a crown has R = 0: B is then its point c; A (a wall, or
+a plain sphere as before) the plane through c across e, turned with it. Two pieces, and A's
+plane with B's sphere:
 
     delta(q) = delta0 + R_a + R_b - |C_a(q) - C_b(q)|,    delta(q) = delta0 + e . (C_b(q) - c_A) + R_b,
 
@@ -78,11 +79,11 @@ K_I, K_J, K_DELTA, K_REACH = 0, 1, 2, 3  # sphere rows (+1; 0: empty), delta0, t
 K_P = 4  # B's centre in A's frame (3)
 K_R = 7  # R_a^T R_b, row-major (9)
 K_E = 16  # force direction in A's frame (3)
-K_CA = 19  # contact point in A's frame (3)
-K_CB = 22  # contact point in B's frame (3)
+K_CA = 19  # A's sphere centre (the contact point where R_a = 0) in A's frame (3)
+K_CB = 22  # B's sphere centre (the contact point where R_b = 0) in B's frame (3)
 K_M = 25  # patch moments (3)
 K_FACE = 28  # a wall contact's ``is_face`` (1.0 or 0.0; dem.rounded_contact.facet_geometry)
-K_RA, K_RB = 29, 30  # the osculating spheres' radii R_a, R_b (K_CA, K_CB then hold their centres)
+K_RA, K_RB = 29, 30  # the osculating spheres' radii R_a, R_b
 KEPT = 31
 
 
