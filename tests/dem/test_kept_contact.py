@@ -137,16 +137,23 @@ def kept_rows_used(sim, steps):
     return served, evaluated
 
 
+def stacked_boxes(params, offset, gap):
+    """BOX flat on the floor and another above it, ``offset`` off its centre along x and ``gap``
+    above its top face."""
+    sim = Simulation(params, gravity=(0, 0, -G), domain_min=(-1, -1, -0.5), domain_max=(1, 1, 1))
+    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 2.0))
+    half = 0.5 * SIZE[2]
+    sim.add_body(BOX, (0.0, 0.0, half))
+    sim.add_body(BOX, (offset, 0.0, 3 * half + gap))
+    return sim
+
+
 def test_a_resting_stack_is_served_from_kept_contacts_at_the_analytic_overlaps():
     # Two boxes stacked flat on the floor, the top one 6 mm off centre, at rest: their contact
     # carries m g (K = E D / 2 between like bodies), the floor 2 m g. (The crown lowers an
     # off-centre box by its phi at the contact, so the overlaps are read from the contacts.)
     params = ContactParams(E=1e6, nu=0.3, e=0.3, mu=0.5)
-    sim = Simulation(params, gravity=(0, 0, -G), domain_min=(-1, -1, -0.5), domain_max=(1, 1, 1))
-    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 2.0))
-    half = 0.5 * SIZE[2]
-    sim.add_body(BOX, (0.0, 0.0, half))
-    sim.add_body(BOX, (0.006, 0.0, 3 * half + 0.0001))
+    sim = stacked_boxes(params, 0.006, 0.0001)
 
     report = sim.run(0.8)
 
@@ -168,12 +175,7 @@ def test_a_box_dropped_on_a_box_comes_to_rest_while_its_contacts_are_kept(E):
     # plane (session 21) the top box kept rocking at 1e-6 to 1e-4 rad/s, fed by the refreshes:
     # the fixed point lacked the crown's rolling, which gives a resting face its stiffness in
     # tilt. With the osculating spheres it comes to rest as the full geometry does (1e-15).
-    params = ContactParams(E=E, nu=0.3, e=0.3, mu=0.5)
-    sim = Simulation(params, gravity=(0, 0, -G), domain_min=(-1, -1, -0.5), domain_max=(1, 1, 1))
-    sim.add_wall(WallMesh.plane((0, 0, 0), (0, 0, 1), 2.0))
-    half = 0.5 * SIZE[2]
-    sim.add_body(BOX, (0.0, 0.0, half))
-    sim.add_body(BOX, (0.0005, 0.0, 3 * half + 0.002))
+    sim = stacked_boxes(ContactParams(E=E, nu=0.3, e=0.3, mu=0.5), 0.0005, 0.002)
     spins = []
     for t in (0.6, 0.8, 1.0):
         assert sim.run(t).ok
