@@ -200,7 +200,6 @@ def kept_contact(kept, p, key, frame_a, origin_a, frame_b, origin_b):
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     if delta0 < 0.0:
         return True, delta0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    nx, ny, nz = _out_of(ra, kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2])
     ax, ay, az = _out_of(ra, kept[p, K_CA], kept[p, K_CA + 1], kept[p, K_CA + 2])
     bx, by, bz = _out_of(rb, kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2])
     ax, ay, az = ax + origin_a[0], ay + origin_a[1], az + origin_a[2]
@@ -211,7 +210,8 @@ def kept_contact(kept, p, key, frame_a, origin_a, frame_b, origin_b):
         length = math.sqrt(vx * vx + vy * vy + vz * vz)
         nx, ny, nz = vx / length, vy / length, vz / length
         delta = delta0 + r_a + r_b - length
-    else:  # A's plane, B's sphere (or point)
+    else:  # A's plane, B's sphere (or point): the kept direction turned with A
+        nx, ny, nz = _out_of(ra, kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2])
         delta = delta0 + nx * (bx - ax) + ny * (by - ay) + nz * (bz - az) + r_b
     return True, delta, nx, ny, nz, bx + r_b * nx, by + r_b * ny, bz + r_b * nz
 
