@@ -32,7 +32,7 @@ import math
 import numba
 
 from dem.conf import JIT_FLAGS, STEP_FLAGS
-from dem.convex import MAX_FEATURE, _clip, _copy_row, _parallel_segments, feature_hulls, plane_basis, support
+from dem.convex import _clip, _copy_row, _parallel_segments, feature_hulls, plane_basis, support
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -47,69 +47,6 @@ def flat_tolerance(tol):
     """How far a feature's vertices may lie off the plane fitted to them for it to count as flat
     (``_height_fit``): the crowned minimiser, on that plane, lies within this of the core."""
     return 1e-6 * tol + 1e-15
-
-
-# Which feature of each shape holds the crowned minimiser, as ``crowned_contact`` leaves it in
-# work[7] (rows past GJK's, beside ``dem.convex.TOPS_ROW``) for ``dem.kept_contact``: its local
-# surface is a sphere of radius R = 1 / (2 kappa) (a face: the crown), a circle of radius R in
-# the plane of the edge and the normal (an edge, crowned along its length), or a point (a
-# corner). FEATURE_NONE: not told (curved features, crossing edges, no area).
-FEATURE_NONE, FEATURE_FACE, FEATURE_EDGE, FEATURE_VERTEX = 0.0, 1.0, 2.0, 3.0
-FEATURE_ROW = MAX_FEATURE - 2  # (kind of A's, kind of B's, 0)
-NO_FEATURES = (FEATURE_NONE,) * 8  # as ``left_features`` gives them
-EDGE_ROW_A, EDGE_ROW_B = MAX_FEATURE - 3, MAX_FEATURE - 4  # an edge's unit direction (world)
-# A minimiser closer than this to a hull's boundary lies on it (m; the clipping puts it there to
-# the last bits of coordinates of about 0.1 m).
-ON_BOUNDARY = 1e-10
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def _feature_kind(hull, h, u, w):
-    """(kind, eu, ew): the feature of the counter-clockwise hull[:h] (projected, ``feature_hulls``)
-    that holds the point (u, w): its inside (a face), an edge (with its unit direction) or a
-    corner."""
-    if h >= 3 and _inside(hull, h, u, w, ON_BOUNDARY):
-        return FEATURE_FACE, 0.0, 0.0
-    if h == 1:
-        return FEATURE_VERTEX, 0.0, 0.0
-    best, kind, bu, bw = math.inf, FEATURE_VERTEX, 0.0, 0.0
-    edges = h if h > 2 else 1
-    for a in range(edges):
-        b = (a + 1) % h
-        eu, ew = hull[b, 0] - hull[a, 0], hull[b, 1] - hull[a, 1]
-        length = math.sqrt(eu * eu + ew * ew)
-        if length == 0.0:
-            continue
-        eu, ew = eu / length, ew / length
-        t = (u - hull[a, 0]) * eu + (w - hull[a, 1]) * ew
-        across = abs((u - hull[a, 0]) * ew - (w - hull[a, 1]) * eu)
-        if across < best:
-            best = across
-            inner = ON_BOUNDARY < t < length - ON_BOUNDARY
-            kind, bu, bw = (FEATURE_EDGE, eu, ew) if inner else (FEATURE_VERTEX, 0.0, 0.0)
-    return kind, bu, bw
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def left_features(work):
-    """The features ``crowned_contact`` left in work[7], as (kind of A's, kind of B's, A's edge
-    direction (3), B's (3)) in the world."""
-    rows = work[7]
-    return (
-        rows[FEATURE_ROW, 0], rows[FEATURE_ROW, 1],
-        rows[EDGE_ROW_A, 0], rows[EDGE_ROW_A, 1], rows[EDGE_ROW_A, 2],
-        rows[EDGE_ROW_B, 0], rows[EDGE_ROW_B, 1], rows[EDGE_ROW_B, 2],
-    )  # fmt: skip
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def put_features(work, held):
-    """Puts back features of ``left_features`` (the closest triangle's, after the others')."""
-    rows = work[7]
-    rows[FEATURE_ROW, 0], rows[FEATURE_ROW, 1] = held[0], held[1]
-    for k in range(3):
-        rows[EDGE_ROW_A, k] = held[2 + k]
-        rows[EDGE_ROW_B, k] = held[5 + k]
 
 
 # Frank-Wolfe steps of ``crown_floor``: 2 clear about 58 % of a shaken pile's pairs held apart by
@@ -356,25 +293,6 @@ def _tilt(hull_a, ha, hull_b, hb, u, w, c, eps):
     return 0.0, 0.0
 
 
-@numba.njit(inline="always", **JIT_FLAGS)
-def _leave_features(rows, told, hull_a, ha, hull_b, hb, cu, cw, u, w):
-    """Writes which features hold the minimiser (cu, cw) into ``rows`` (work[7]): ``FEATURE_ROW``
-    and the edges' directions. Two edges (crossing, or parallel) are not told: no simple surface
-    pair holds their contact."""
-    kind_a, kind_b = FEATURE_NONE, FEATURE_NONE
-    if told:
-        kind_a, eau, eaw = _feature_kind(hull_a, ha, cu, cw)
-        kind_b, ebu, ebw = _feature_kind(hull_b, hb, cu, cw)
-        if kind_a == FEATURE_EDGE and kind_b == FEATURE_EDGE:
-            kind_a, kind_b = FEATURE_NONE, FEATURE_NONE
-        if kind_a == FEATURE_VERTEX and kind_b == FEATURE_VERTEX:
-            kind_a, kind_b = FEATURE_NONE, FEATURE_NONE
-        for k in range(3):
-            rows[EDGE_ROW_A, k] = eau * u[k] + eaw * w[k]
-            rows[EDGE_ROW_B, k] = ebu * u[k] + ebw * w[k]
-    rows[FEATURE_ROW, 0], rows[FEATURE_ROW, 1] = kind_a, kind_b
-
-
 @numba.njit(**STEP_FLAGS)
 def crowned_contact(va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work):
     """Crowned distance D of two separated convex shapes ``a`` and ``b`` (``dem.convex.Core``s of
@@ -435,15 +353,12 @@ def crowned_contact(va, a, crown_a, vb, b, crown_b, p_a, p_b, tol, work):
         ha_c = alpha_a + bua * cu + bwa * cw
         hb_c = alpha_b + bub * cu + bwb * cw
     slack = 1e-9 * tol + 1e-15
-    told = flat_a and flat_b and m != 0
     if ha_c < -slack or hb_c < -slack:
         # crossing edges, a single pair of closest points (no freedom), or features whose
         # overlap has no area: the closest points
         cu = 0.5 * ((ax + bx) * ux + (ay + by) * uy + (az + bz) * uz)
         cw = 0.5 * ((ax + bx) * wx + (ay + by) * wy + (az + bz) * wz)
         ha_c = hb_c = 0.0
-        told = False
-    _leave_features(work[7], told, hull_a, ha, hull_b, hb, cu, cw, u, w)
     za = s_a + ha_c
     zb = s_b - hb_c
     xx, xy, xz = cu * ux + cw * wx + za * nx, cu * uy + cw * wy + za * ny, cu * uz + cw * wz + za * nz

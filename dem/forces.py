@@ -50,7 +50,7 @@ from dem.contact import (
     sphere_contact_force,
 )
 from dem.convex import at_point, place_body
-from dem.crown import crown_radius, left_features
+from dem.crown import crown_radius
 from dem.facets import PLANE_SLACK, closest_point_on_facet, plane_distance
 from dem.kept_contact import (
     K_FACE,
@@ -415,7 +415,6 @@ def _sphere_pair_forces(bodies, spheres, pairs, moved2, lim, hist_dt):
                     point,
                     (s_uu, s_uw, s_ww),
                     (crown_radius(_row(crown, i)), crown_radius(_row(crown, j))),
-                    left_features(work),
                 )
             _add_sums(grp_sum, g, delta, _approach_rate(bodies, ba, bb, point, (nx, ny, nz)))
             n_deferred += 1
@@ -535,13 +534,6 @@ def _row(table, i):
     """Row i of an (n, 3) table as a 3-tuple: a body's centre, velocity or spin, a sphere row's
     crown (``dem/crown.py``)."""
     return table[i, 0], table[i, 1], table[i, 2]
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def _wall_first(held):
-    """The features of a piece-facet contact (``dem.crown.left_features``: the piece A, the facet
-    B) as its kept row names them (A the wall, B the piece)."""
-    return held[1], held[0], held[5], held[6], held[7], held[2], held[3], held[4]
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -712,7 +704,6 @@ def _facet_pair_geometry(p, bodies, spheres, walls, wall_pairs, lim, tri_flat, s
                         point,
                         (s_uu, s_uw, s_ww),
                         (0.0, crown_radius(_row(spheres.crown, i))),
-                        _wall_first(left_features(spheres.work)),
                     )
                     wall_pairs.kept[p, K_FACE] = 1.0 if is_face else 0.0
                 return True, -1

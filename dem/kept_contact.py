@@ -12,38 +12,31 @@ at most
 
     Delta = |p(q) - p(q0)| + reach ||R(q) - R(q0)||_F  <=  KEEP_FRACTION * delta0
 
-relative to A, the contact is the two surfaces that hold it, each fixed in its body, as the
-crowned contact found them (``dem.crown.left_features``): a face is its crown's sphere of radius
-R = 1 / (2 kappa) (``dem.crown.crown_radius``) about the centre C = c + R e (A) or c - R e (B);
-an edge is the circle of its crowned length, of radius R about the same centre in the plane of
-the edge and e; a corner is its point c (R = 0). Two crossing edges, curved features, and a
-plain sphere are not told apart and keep the sphere (R = 0 for a plain sphere). A wall (or a
-plain sphere as A) is the plane through c across e, turned with it. Two spheres (or points), and
-A's plane with B's sphere:
+relative to A, the contact is the two surfaces' osculating spheres at c: a crowned piece's of
+radius R = 1 / (2 kappa) (``dem.crown.crown_radius``) about the centre C = c + R e (A) or c - R e
+(B), fixed in its body. A side without a crown has R = 0: B is then its point c; A (a wall, or
+a plain sphere as before) the plane through c across e, turned with it. Two pieces, and A's
+plane with B's sphere:
 
     delta(q) = delta0 + R_a + R_b - |C_a(q) - C_b(q)|,    delta(q) = delta0 + e . (C_b(q) - c_A) + R_b,
 
-the force along C_a - C_b (along e) acting where that line meets B's sphere; a circle enters
-through its point nearest the other side's centre (or deepest across A's plane). That is a
-function of the relative pose, so the force it gives is exactly conservative and conserves
-linear and angular momentum, and its value and first derivatives at q0 are the full geometry's
-(e is the gradient of the crowned distance, ``dem.crown``; the line of the centres passes through
-c along e). Why the surfaces and not B's point on A's plane (session 21): a face resting on a
-face is held in its tilt by the crown's rolling, its contact moving by R per unit of tilt (about
-2 m on a phone); a point fixed in the body lacks that stiffness, and each refresh started a new
+the force along C_a - C_b (along e) acting where that line meets B's sphere. That is a function
+of the relative pose, so the force it gives is exactly conservative and conserves linear and
+angular momentum, and its value and first derivatives at q0 are the full geometry's (e is the
+gradient of the crowned distance, ``dem.crown``; the line of the centres passes through c along
+e). Why spheres and not B's point on A's plane (session 21): a face resting on a face is held
+in its tilt by the crown's rolling, its contact moving by R per unit of tilt (about 2 m on a
+phone); a point fixed in the body lacks that stiffness, and each refresh started a new
 linearisation, so a box resting on a box kept rocking at 1e-6 to 1e-4 rad/s, in a cycle the
 kept rows fed. The spheres carry the rolling to second order and the box comes to rest (1e-14
-rad/s, as without kept rows; ``benchmarks/README.md``, session 23). Why not a sphere everywhere
-(session 23): a corner's contact stays at the corner and an edge's moves along it only, so a
-sphere there rolled the point by R per unit of turn (2e-2 of a phone's reach at a motion of 0.3
-of the overlap, against 1e-4 with the features' own surfaces; session 24).
+rad/s, as without kept rows; ``benchmarks/README.md``, session 23). At an edge or a corner,
+whose core is sharp, the crown's sphere adds a rolling of the same second order.
 
 The bound: the crowned distance is a minimum over pairs of points fixed in the bodies of a
 1-Lipschitz function of their positions, so it moves by at most Delta; C_b lies within reach +
-R_b of B's centre (an edge's circle within reach + 2 R_b), so the kept overlap moves by at most
-Delta + 2 R_b ||R(q) - R(q0)||_F, and the two differ by at most their sum (the error is second
-order in the motion, far less in practice: at most 2e-6 of the overlap in the feeder's resting
-pile). A pair that moves more (any
+R_b of B's centre, so the kept overlap moves by at most Delta + R_b ||R(q) - R(q0)||_F, and the
+two differ by at most their sum (the error is second order in the motion, far less in practice:
+at most 2e-6 of the overlap in the feeder's resting pile). A pair that moves more (any
 collision: 0.1 m/s is 3 um a step) is evaluated in full every step, as before; its row is not
 even written when the bodies' velocities say the next step would not be served either
 (``moves_beyond``), so the shaken feeder pays a comparison a contact. Nothing is served with
@@ -70,7 +63,6 @@ import math
 import numba
 
 from dem.conf import JIT_FLAGS
-from dem.crown import FEATURE_EDGE, FEATURE_VERTEX
 
 # The largest material motion of B relative to A, as a fraction of the kept overlap, that the
 # kept geometry serves: its overlap is then within twice this fraction of the full geometry's.
@@ -91,12 +83,8 @@ K_CA = 19  # A's sphere centre (the contact point where R_a = 0) in A's frame (3
 K_CB = 22  # B's sphere centre (the contact point where R_b = 0) in B's frame (3)
 K_M = 25  # patch moments (3)
 K_FACE = 28  # a wall contact's ``is_face`` (1.0 or 0.0; dem.rounded_contact.facet_geometry)
-K_RA, K_RB = 29, 30  # the surfaces' radii R_a, R_b (0: a corner's point, or a wall's plane)
-K_KA, K_KB = 31, 32  # the features holding the contact (``dem.crown.FEATURE_*``)
-K_XA = 33  # A's edge: the axis of its circle (edge x normal) in A's frame (3)
-K_XB = 36  # B's edge: the same in B's frame (3)
-K_PLANE = 39  # 1.0: A is a wall's plane
-KEPT = 40
+K_RA, K_RB = 29, 30  # the osculating spheres' radii R_a, R_b
+KEPT = 31
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -167,44 +155,20 @@ def keep_apart(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
-def _axis(ra, t, n):
-    """The unit axis t x n of an edge's circle (t the edge, n the normal: world 3-tuples) in the
-    frame ra."""
-    kx, ky, kz = t[1] * n[2] - t[2] * n[1], t[2] * n[0] - t[0] * n[2], t[0] * n[1] - t[1] * n[0]
-    size = math.sqrt(kx * kx + ky * ky + kz * kz)
-    if size == 0.0:
-        return 0.0, 0.0, 0.0
-    return _into(ra, kx / size, ky / size, kz / size)
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def keep_contact(
-    kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta, n, point, moment, radii, features
-):  # fmt: skip
+def keep_contact(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta, n, point, moment, radii):
     """Row p of ``kept`` := the contact just evaluated in full between A (rotation ``frame_a``,
     a row-major 9-tuple, and centre ``origin_a``) and B: overlap ``delta``, force direction n
     (B -> A), contact point and patch moments (3-tuples), with the relative pose; ``key`` (two
     numbers) names the pair, ``reach`` bounds B's material points that matter (its core and
-    roundings) about ``origin_b``; ``radii`` = (R_a, R_b) of the crowns (R_a 0 for a wall, whose
-    plane A then is); ``features`` what
-    holds it (``dem.crown.left_features``, A's and B's as this row names them): a face is its
-    sphere of radius R, an edge its circle of radius R about the same centre, a corner its
-    point (R 0; the module's docstring)."""
+    roundings) about ``origin_b``; ``radii`` = (R_a, R_b) of the osculating spheres (the module's
+    docstring; R_a 0 for a wall)."""
     keep_apart(kept, p, key, reach, frame_a, origin_a, frame_b, origin_b, delta)
     ra, rb = frame_a, frame_b
     nx, ny, nz = n
     ex, ey, ez = _into(ra, nx, ny, nz)
     kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2] = ex, ey, ez
-    kind_a, kind_b = features[0], features[1]
-    plane = radii[0] == 0.0
-    r_a = 0.0 if kind_a == FEATURE_VERTEX or plane else radii[0]
-    r_b = 0.0 if kind_b == FEATURE_VERTEX else radii[1]
+    r_a, r_b = radii
     kept[p, K_RA], kept[p, K_RB] = r_a, r_b
-    kept[p, K_KA], kept[p, K_KB], kept[p, K_PLANE] = kind_a, kind_b, 1.0 if plane else 0.0
-    xa = _axis(ra, (features[2], features[3], features[4]), n) if kind_a == FEATURE_EDGE else (0.0, 0.0, 0.0)
-    xb = _axis(rb, (features[5], features[6], features[7]), n) if kind_b == FEATURE_EDGE else (0.0, 0.0, 0.0)
-    for k in range(3):
-        kept[p, K_XA + k], kept[p, K_XB + k] = xa[k], xb[k]
     cx, cy, cz = point[0] + r_a * nx, point[1] + r_a * ny, point[2] + r_a * nz
     ax, ay, az = _into(ra, cx - origin_a[0], cy - origin_a[1], cz - origin_a[2])
     kept[p, K_CA], kept[p, K_CA + 1], kept[p, K_CA + 2] = ax, ay, az
@@ -212,56 +176,6 @@ def keep_contact(
     bx, by, bz = _into(rb, cx - origin_b[0], cy - origin_b[1], cz - origin_b[2])
     kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2] = bx, by, bz
     kept[p, K_M], kept[p, K_M + 1], kept[p, K_M + 2] = moment[0], moment[1], moment[2]
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def _on_circle(centre, radius, axis, x):
-    """The point of the circle (centre, radius, unit axis: 3-tuples) nearest x, or the centre's
-    nearest point on the sphere when the axis is 0."""
-    vx, vy, vz = x[0] - centre[0], x[1] - centre[1], x[2] - centre[2]
-    along = vx * axis[0] + vy * axis[1] + vz * axis[2]
-    vx, vy, vz = vx - along * axis[0], vy - along * axis[1], vz - along * axis[2]
-    size = math.sqrt(vx * vx + vy * vy + vz * vz)
-    return centre[0] + radius * vx / size, centre[1] + radius * vy / size, centre[2] + radius * vz / size
-
-
-@numba.njit(inline="always", **JIT_FLAGS)
-def kept_model(kept, p, frame_a, origin_a, frame_b, origin_b):
-    """(delta, nx, ny, nz, cx, cy, cz): contact row p's surfaces (the module's docstring) at the
-    bodies' present pose, however far they have moved."""
-    ra, rb = frame_a, frame_b
-    ax, ay, az = _out_of(ra, kept[p, K_CA], kept[p, K_CA + 1], kept[p, K_CA + 2])
-    bx, by, bz = _out_of(rb, kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2])
-    ax, ay, az = ax + origin_a[0], ay + origin_a[1], az + origin_a[2]
-    bx, by, bz = bx + origin_b[0], by + origin_b[1], bz + origin_b[2]
-    delta0, r_a, r_b = kept[p, K_DELTA], kept[p, K_RA], kept[p, K_RB]
-    edge_a = kept[p, K_KA] == FEATURE_EDGE and kept[p, K_PLANE] == 0.0
-    edge_b = kept[p, K_KB] == FEATURE_EDGE
-    if kept[p, K_PLANE] != 0.0:  # A's plane: the kept direction turned with A
-        nx, ny, nz = _out_of(ra, kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2])
-        depth = r_b
-        if edge_b:  # B's circle: its point deepest along n
-            kx, ky, kz = _out_of(rb, kept[p, K_XB], kept[p, K_XB + 1], kept[p, K_XB + 2])
-            along = nx * kx + ny * ky + nz * kz
-            depth = r_b * math.sqrt(max(0.0, 1.0 - along * along))
-            sx, sy, sz = _on_circle((bx, by, bz), r_b, (kx, ky, kz), (bx + nx, by + ny, bz + nz))
-        else:
-            sx, sy, sz = bx + r_b * nx, by + r_b * ny, bz + r_b * nz
-        delta = delta0 + nx * (bx - ax) + ny * (by - ay) + nz * (bz - az) + depth
-        return delta, nx, ny, nz, sx, sy, sz
-    if edge_a:  # A's circle against B's sphere (or point)
-        kx, ky, kz = _out_of(ra, kept[p, K_XA], kept[p, K_XA + 1], kept[p, K_XA + 2])
-        ax, ay, az = _on_circle((ax, ay, az), r_a, (kx, ky, kz), (bx, by, bz))
-        r_a = 0.0
-    elif edge_b:  # A's sphere (or point) against B's circle
-        kx, ky, kz = _out_of(rb, kept[p, K_XB], kept[p, K_XB + 1], kept[p, K_XB + 2])
-        bx, by, bz = _on_circle((bx, by, bz), r_b, (kx, ky, kz), (ax, ay, az))
-        r_b = 0.0
-    vx, vy, vz = ax - bx, ay - by, az - bz
-    length = math.sqrt(vx * vx + vy * vy + vz * vz)
-    nx, ny, nz = vx / length, vy / length, vz / length
-    delta = delta0 + r_a + r_b - length
-    return delta, nx, ny, nz, bx + r_b * nx, by + r_b * ny, bz + r_b * nz
 
 
 @numba.njit(inline="always", **JIT_FLAGS)
@@ -286,8 +200,20 @@ def kept_contact(kept, p, key, frame_a, origin_a, frame_b, origin_b):
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     if delta0 < 0.0:
         return True, delta0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    delta, nx, ny, nz, cx, cy, cz = kept_model(kept, p, frame_a, origin_a, frame_b, origin_b)
-    return True, delta, nx, ny, nz, cx, cy, cz
+    ax, ay, az = _out_of(ra, kept[p, K_CA], kept[p, K_CA + 1], kept[p, K_CA + 2])
+    bx, by, bz = _out_of(rb, kept[p, K_CB], kept[p, K_CB + 1], kept[p, K_CB + 2])
+    ax, ay, az = ax + origin_a[0], ay + origin_a[1], az + origin_a[2]
+    bx, by, bz = bx + origin_b[0], by + origin_b[1], bz + origin_b[2]
+    r_a, r_b = kept[p, K_RA], kept[p, K_RB]
+    if r_a > 0.0:  # two spheres (B's may be a point)
+        vx, vy, vz = ax - bx, ay - by, az - bz
+        length = math.sqrt(vx * vx + vy * vy + vz * vz)
+        nx, ny, nz = vx / length, vy / length, vz / length
+        delta = delta0 + r_a + r_b - length
+    else:  # A's plane, B's sphere (or point): the kept direction turned with A
+        nx, ny, nz = _out_of(ra, kept[p, K_E], kept[p, K_E + 1], kept[p, K_E + 2])
+        delta = delta0 + nx * (bx - ax) + ny * (by - ay) + nz * (bz - az) + r_b
+    return True, delta, nx, ny, nz, bx + r_b * nx, by + r_b * ny, bz + r_b * nz
 
 
 @numba.njit(inline="always", **JIT_FLAGS)

@@ -56,7 +56,7 @@ from dem.convex import (
     plane_basis,
     support,
 )
-from dem.crown import crown_floor, crowned_contact, left_features, put_features
+from dem.crown import crown_floor, crowned_contact
 from dem.facets import closest_point_on_triangle
 
 IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # walls translate, never turn
@@ -474,7 +474,6 @@ def _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work, axis):
     # closest points; coplanar triangles agree where they meet).
     crowned = np.inf
     nx = ny = nz = cx = cy = cz = 0.0
-    held = left_features(work)
     for k in range(t_count):
         d = gjk[k, 0]
         if d > best + tol or d == 0.0:
@@ -495,9 +494,6 @@ def _facet_triangles(va, a, ra, crown_a, tri, facet, tol, work, axis):
             crowned = value
             nx, ny, nz = ex, ey, ez
             cx, cy, cz = 0.5 * (xx + yx), 0.5 * (xy + yy), 0.5 * (xz + yz)
-            held = left_features(work)
-    if crowned < np.inf:
-        put_features(work, held)
     delta = ra - crowned
     if delta <= 0.0:
         return delta, best, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
