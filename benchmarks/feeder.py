@@ -19,6 +19,12 @@ and the last lines give each one's mean and range over the seeds and the ratio o
 Each representation is first run once on the workers' tiny warm-up scene (``worker/warmup.py``),
 so that no timed run includes the kernels' compile (with a cold cache and a busy machine one
 seed took 155.7 s CPU where it takes 57 s warm, benchmarks/README session 21).
+
+The summary prints both of issue 12's figures with a verdict: the ratio of the means with its
+90 % bootstrap interval over the seeds (the seeds resampled together for both representations,
+since both ran the same seeds; one seed's jam moves a ten-seed mean by a quarter, so a ratio
+without its interval says little), and the runs that clogged (status ok, items in the tray at
+the end): how many, their mean and largest CPU time against the 30 s goal.
 """
 
 from __future__ import annotations
@@ -28,6 +34,9 @@ import os
 import statistics
 import time
 from collections import defaultdict
+from typing import NamedTuple
+
+import numpy as np
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
@@ -36,6 +45,18 @@ from dem.scenarios.feeder_config import FeederConfig, load_feeder_config  # noqa
 from worker.warmup import WARMUP_PARAMS, WARMUP_SCENARIO  # noqa: E402
 
 CLOGGING = {"e": 0.2, "mu": 0.9}  # --clogging: items stay on the tray (also benchmarks.profile_engine)
+GOAL_RATIO = 1.5  # issue 12: the polyhedra's time at most this many times the clumps'
+GOAL_CLOGGED_S = 30.0  # issue 12: a run that clogs, no early stop, one core
+BOOTSTRAP_RESAMPLES = 10_000
+
+
+class Timed(NamedTuple):
+    """One timed run: its seed, CPU seconds, items left and whether it ended ``ok``."""
+
+    seed: int
+    cpu: float
+    n_remaining: int
+    ok: bool
 
 
 def main() -> None:
@@ -63,7 +84,7 @@ def main() -> None:
     ]
     for representation in args.representation:
         _warm(representation)
-    cpu_by_run: dict[tuple[str, float | None, float], list[float]] = defaultdict(list)
+    timed: dict[tuple[str, float | None, float], list[Timed]] = defaultdict(list)
     for seed in args.seed:
         for representation, tolerance in runs:
             config.items.representation = representation
@@ -73,7 +94,8 @@ def main() -> None:
                 started, cpu = time.perf_counter(), time.process_time()
                 r = run_feeder(config, {"E": E, **params}, seed)
                 wall, cpu = time.perf_counter() - started, time.process_time() - cpu
-                cpu_by_run[(representation, tolerance, E)].append(cpu)
+                ok = r.status.value == "ok"
+                timed[(representation, tolerance, E)].append(Timed(seed, cpu, r.n_remaining, ok))
                 shape = _label(representation, tolerance)
                 print(
                     f"{shape:>10} {E:8.0e} {wall:8.1f} {cpu:7.1f} {r.sim_time:7.2f} {r.steps:9d} "
@@ -82,7 +104,8 @@ def main() -> None:
                     flush=True,
                 )
     if len(args.seed) > 1 or len(runs) > 1:
-        _print_means(cpu_by_run, args.seed)
+        _print_means(timed, args.seed)
+        _print_clogged(timed)
 
 
 def _warm(representation: str) -> None:
@@ -98,18 +121,65 @@ def _label(representation: str, tolerance: float | None) -> str:
     return representation if tolerance is None else f"{representation} {tolerance:g}r"
 
 
-def _print_means(cpu_by_run: dict[tuple[str, float | None, float], list[float]], seeds: list[int]) -> None:
+def _print_means(timed: dict[tuple[str, float | None, float], list[Timed]], seeds: list[int]) -> None:
     """Each run's CPU time over the seeds, and each representation's against the clumps' (ratio of
-    the means: a seed's pile path moves both, so a per-seed ratio is noisier)."""
-    print(f"over seeds {' '.join(map(str, seeds))}: CPU s mean (least-most); against clumps")
-    for (representation, tolerance, E), cpus in cpu_by_run.items():
-        clumps = cpu_by_run.get(("clump", None, E))
-        against = f"{statistics.mean(cpus) / statistics.mean(clumps):.2f}x" if clumps else "-"
+    the means: a seed's pile path moves both, so a per-seed ratio is noisier), with its interval
+    and the verdict against ``GOAL_RATIO``."""
+    print(f"over seeds {' '.join(map(str, seeds))}: CPU s mean (least-most); against clumps [90 % interval]")
+    for (representation, tolerance, E), runs in timed.items():
+        cpus = [run.cpu for run in runs]
+        clumps = [run.cpu for run in timed.get(("clump", None, E), [])]
+        against = "-"
+        if clumps and representation != "clump":
+            ratio = statistics.mean(cpus) / statistics.mean(clumps)
+            low, high = ratio_interval(cpus, clumps)
+            against = f"{ratio:.2f}x [{low:.2f}-{high:.2f}] {_verdict(high <= GOAL_RATIO, low > GOAL_RATIO)}"
+            against += f" (goal <= {GOAL_RATIO}x)"
+        elif clumps:
+            against = "1.00x"
         shape, mean = _label(representation, tolerance), statistics.mean(cpus)
+        print(f"{shape:>10} {E:8.0e} {mean:7.1f} ({min(cpus):.1f}-{max(cpus):.1f}) {against}", flush=True)
+
+
+def _print_clogged(timed: dict[tuple[str, float | None, float], list[Timed]]) -> None:
+    """The runs that clogged (ended ok with items in the tray) against ``GOAL_CLOGGED_S`` (met when
+    the slowest is within it), and how many runs did not end ok (never counted as either)."""
+    goal = f"goal: every one <= {GOAL_CLOGGED_S:g} s"
+    print(f"runs that clogged (ok, N_t > 0 at the end): count, CPU s mean and largest ({goal})")
+    for (representation, tolerance, E), runs in timed.items():
+        clogged = [run.cpu for run in runs if run.ok and run.n_remaining > 0]
+        failed = sum(not run.ok for run in runs)
+        shape = _label(representation, tolerance)
+        tail = f"; {failed} not ok" if failed else ""
+        if not clogged:
+            print(f"{shape:>10} {E:8.0e} none of {len(runs)}{tail}", flush=True)
+            continue
+        worst = max(clogged)
+        verdict = _verdict(worst <= GOAL_CLOGGED_S, worst > GOAL_CLOGGED_S)
         print(
-            f"{shape:>10} {E:8.0e} {mean:7.1f} ({min(cpus):.1f}-{max(cpus):.1f}) {against}",
+            f"{shape:>10} {E:8.0e} {len(clogged)} of {len(runs)}: {statistics.mean(clogged):.1f} s, "
+            f"largest {worst:.1f} s {verdict}{tail}",
             flush=True,
         )
+
+
+def ratio_interval(cpus: list[float], clumps: list[float], level: float = 0.9) -> tuple[float, float]:
+    """The bootstrap interval of mean(cpus) / mean(clumps) over seeds, each resample drawing the
+    same seeds for both (the lists are in seed order); a fixed generator, so a rerun prints the
+    same interval."""
+    a, b = np.asarray(cpus), np.asarray(clumps)
+    if len(a) != len(b) or len(a) < 2:
+        ratio = float(a.mean() / b.mean())
+        return ratio, ratio
+    draws = np.random.default_rng(0).integers(0, len(a), size=(BOOTSTRAP_RESAMPLES, len(a)))
+    ratios = a[draws].mean(axis=1) / b[draws].mean(axis=1)
+    tail = 50.0 * (1.0 - level)
+    low, high = np.percentile(ratios, [tail, 100.0 - tail])
+    return float(low), float(high)
+
+
+def _verdict(met: bool, missed: bool) -> str:
+    return "met" if met else ("NOT met" if missed else "undecided")
 
 
 if __name__ == "__main__":

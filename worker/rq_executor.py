@@ -319,6 +319,8 @@ class RqExecutor:
         if not trial_ids:
             return
         self._cancelled.update(trial_ids)
+        for trial in trial_ids:  # no longer expected: its time between lists would stay forever
+            self._between.pop(trial, None)
         with self._redis.pipeline(transaction=False) as pipe:
             for trial in trial_ids:
                 pipe.set(cancel_key(trial), 1, ex=CANCEL_TTL_S)

@@ -351,6 +351,25 @@ def test_cancelled_trials_leave_the_queue_and_are_never_reported(executor, conne
     assert sorted(o.trial_id for o in executor.poll(timeout=1.0)) == [s.trial_id for s in specs[1:]]
 
 
+def test_a_trial_cancelled_while_between_lists_leaves_no_time_behind(executor, connection):
+    # A job taken from one of several queues is in no list until its worker registers it; the
+    # executor keeps when it first saw it so. Cancelled, the trial is never expected again, so
+    # only cancel can drop that time (a long-lived service would keep one per such trial).
+    spec = make_spec("s1", 0)
+    executor.submit([spec])
+    queues = [
+        Queue(name, connection=connection, serializer=JSONSerializer)
+        for name in engine_queues(QUEUE, ["numba", "liggghts"])
+    ]
+    Queue.dequeue_any(queues, None, connection=connection, serializer=JSONSerializer)
+    assert executor.in_flight([spec.trial_id]) == {spec.trial_id}
+    assert spec.trial_id in executor._between
+
+    executor.cancel([spec.trial_id])
+
+    assert spec.trial_id not in executor._between
+
+
 def test_an_unreachable_redis_is_an_error_naming_the_url():
     with pytest.raises(RedisQueueError, match="127.0.0.1:1/0"):
         RqExecutor.from_url("redis://127.0.0.1:1/0")
