@@ -123,18 +123,23 @@ def _label(representation: str, tolerance: float | None) -> str:
 
 def _print_means(timed: dict[tuple[str, float | None, float], list[Timed]], seeds: list[int]) -> None:
     """Each run's CPU time over the seeds, and each representation's against the clumps' (ratio of
-    the means: a seed's pile path moves both, so a per-seed ratio is noisier), with its interval
-    and the verdict against ``GOAL_RATIO``."""
+    the means over the seeds where both ended ok: a seed's pile path moves both, so a per-seed
+    ratio is noisier), with its interval and the verdict against ``GOAL_RATIO``."""
     print(f"over seeds {' '.join(map(str, seeds))}: CPU s mean (least-most); against clumps [90 % interval]")
     for (representation, tolerance, E), runs in timed.items():
         cpus = [run.cpu for run in runs]
-        clumps = [run.cpu for run in timed.get(("clump", None, E), [])]
+        clumps = {run.seed: run for run in timed.get(("clump", None, E), [])}
         against = "-"
         if clumps and representation != "clump":
-            ratio = statistics.mean(cpus) / statistics.mean(clumps)
-            low, high = ratio_interval(cpus, clumps)
-            against = f"{ratio:.2f}x [{low:.2f}-{high:.2f}] {_verdict(high <= GOAL_RATIO, low > GOAL_RATIO)}"
-            against += f" (goal <= {GOAL_RATIO}x)"
+            # A run that stopped (invalid, unstable) did less of the protocol: its seed is left out.
+            both = [(run.cpu, clumps[run.seed].cpu) for run in runs if run.ok and clumps[run.seed].ok]
+            if both:
+                ours, theirs = [pair[0] for pair in both], [pair[1] for pair in both]
+                ratio = statistics.mean(ours) / statistics.mean(theirs)
+                low, high = ratio_interval(ours, theirs)
+                verdict = _verdict(high <= GOAL_RATIO, low > GOAL_RATIO)
+                against = f"{ratio:.2f}x [{low:.2f}-{high:.2f}] {verdict} (goal <= {GOAL_RATIO}x"
+                against += f"; {len(both)} of {len(runs)} seeds, both ok)"
         elif clumps:
             against = "1.00x"
         shape, mean = _label(representation, tolerance), statistics.mean(cpus)

@@ -45,7 +45,9 @@ def feeder_state(
     representation: str, until: float, seed: int = 1, config_path: str = FEEDER_CONFIG, clogging: bool = False
 ):
     """The feeder's engine (the quick feeder unless ``config_path``; E = 1e7 Pa, and with
-    ``clogging`` benchmarks.feeder's e 0.2, mu 0.9) run to ``until`` seconds."""
+    ``clogging`` benchmarks.feeder's e 0.2, mu 0.9) run to ``until`` seconds, or to the end of
+    the deposition (the vibration's start, 5 s in both configs) if ``until`` comes before it: the
+    insertion and deposition always run whole."""
     from dem.scenarios.base import merged_params
     from dem.scenarios.feeder import _FeederRun
     from dem.scenarios.feeder_config import load_feeder_config
