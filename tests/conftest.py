@@ -1,13 +1,16 @@
-"""Fixtures for real services: a fresh PostgreSQL database per test session and a dedicated,
-flushed Redis database.
+"""Fixtures for real services and programs: a fresh PostgreSQL database per test session, a
+dedicated, flushed Redis database, and Debian's LIGGGHTS (Chromium: ``tests/dashboard``).
 
-With ``CI=true`` a missing service fails the test; elsewhere it skips with a reason that says how
-to provide it (``DEMCAL_TEST_DATABASE_URL`` / ``DEMCAL_TEST_REDIS_URL``).
+With ``CI=true`` a missing one fails the test (``.ci/run`` provides them all); elsewhere it skips
+with a reason that says how to provide it (``DEMCAL_TEST_DATABASE_URL`` /
+``DEMCAL_TEST_REDIS_URL``, or the Debian package), so the README's test command passes on a
+fresh machine.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import uuid
 
 import pytest
@@ -25,14 +28,27 @@ def _in_ci() -> bool:
     return os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
 
-def _unavailable(service: str, variable: str, exc: Exception) -> None:
-    message = (
-        f"{service} is not reachable ({exc.__class__.__name__}: {exc}); start it or point "
-        f"{variable} at one"
-    )
+def missing(what: str, reason: str) -> None:
+    """A test's prerequisite is missing: fail with CI=true, else skip with the reason."""
     if _in_ci():
-        pytest.fail(f"CI=true requires {service}: {message}")
-    pytest.skip(message)
+        pytest.fail(f"CI=true requires {what}: {reason}")
+    pytest.skip(reason)
+
+
+def _unavailable(service: str, variable: str, exc: Exception) -> None:
+    missing(
+        service,
+        f"{service} is not reachable ({exc.__class__.__name__}: {exc}); start it or point {variable} at one",
+    )
+
+
+@pytest.fixture(scope="session")
+def liggghts() -> str:
+    """The path of Debian's ``liggghts``, which the LIGGGHTS engine runs (``dem/engines/liggghts.py``)."""
+    path = shutil.which("liggghts")
+    if path is None:
+        missing("LIGGGHTS", "liggghts is not on PATH: install Debian's liggghts (see .ci/run)")
+    return path
 
 
 @pytest.fixture(scope="session")

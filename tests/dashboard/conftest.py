@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from api.store import SqlStore
-from tests.conftest import _in_ci
+from tests.conftest import missing
 from tests.dashboard.seed import SeededStudy, migrated_store, seed_study, snapshot_run
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -102,10 +102,9 @@ def dashboard(tmp_path_factory):
 def browser():
     """Headless Debian Chromium; skipped (failed with CI=true) when it is not installed."""
     if not CHROMIUM.is_file():
-        reason = f"{CHROMIUM} is missing: install Debian's chromium and chromium-driver (see .ci/run)"
-        if _in_ci():
-            pytest.fail(f"CI=true requires Chromium: {reason}")
-        pytest.skip(reason)
+        missing(
+            "Chromium", f"{CHROMIUM} is missing: install Debian's chromium and chromium-driver (see .ci/run)"
+        )
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as playwright:

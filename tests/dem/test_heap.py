@@ -191,7 +191,7 @@ def test_items_heap_runs_with_the_builtin_engine():
         assert "heap" in result.message
 
 
-def test_liggghts_agrees_with_the_builtin_engine_within_the_seed_spread():
+def test_liggghts_agrees_with_the_builtin_engine_within_the_seed_spread(liggghts):
     config = quick_config()
     scenario = registry.get("angle_of_repose")
     angles = {"numba": [], "liggghts": []}

@@ -6,8 +6,6 @@ recommended. Six runs of a 200-sphere heap: well under a minute on two cores."""
 
 from __future__ import annotations
 
-import shutil
-
 import pytest
 
 from optimizer.protocols import StudyStatus
@@ -44,8 +42,7 @@ seeds = 0
 """
 
 
-def test_a_small_liggghts_case_calibrates_end_to_end(tmp_path):
-    assert shutil.which("liggghts"), "CI installs Debian's liggghts (.ci/run)"
+def test_a_small_liggghts_case_calibrates_end_to_end(tmp_path, liggghts):
     (tmp_path / "study.toml").write_text(STUDY)
 
     output = finish(demcal(["calibrate", "study.toml"], tmp_path), timeout=600)
@@ -68,7 +65,9 @@ def test_a_small_liggghts_case_calibrates_end_to_end(tmp_path):
 
 
 @pytest.mark.parametrize("engine", ["numba", "liggghts"])
-def test_simulate_runs_one_case_on_either_engine(tmp_path, engine):
+def test_simulate_runs_one_case_on_either_engine(tmp_path, engine, request):
+    if engine == "liggghts":
+        request.getfixturevalue("liggghts")
     config = tmp_path / "heap.toml"
     config.write_text(STUDY.split("[parameters]")[0].split("[scenario]")[1].replace("\n", "\n", 1))
     process = demcal(["simulate", str(config), "--engine", engine, "--json", "--set", "mu=0.5"], tmp_path)
