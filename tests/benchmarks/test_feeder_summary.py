@@ -22,7 +22,7 @@ def test_a_ratio_that_is_the_same_on_every_seed_has_no_spread_when_seeds_are_pai
 def test_the_interval_holds_the_ratio_of_the_means_and_widens_with_the_seeds_spread():
     rng = np.random.default_rng(3)
     clumps = list(rng.uniform(15.0, 20.0, size=10))
-    steady = [1.8 * c for c in clumps]
+    steady = [1.8 * c * f for c, f in zip(clumps, rng.uniform(0.98, 1.02, size=10), strict=True)]
     jams = [c * (4.0 if k % 3 == 0 else 1.2) for k, c in enumerate(clumps)]
 
     narrow, wide = ratio_interval(steady, clumps), ratio_interval(jams, clumps)

@@ -98,6 +98,17 @@ def run_worker_until_empty(connection) -> None:
     build_worker(connection, [QUEUE], heartbeat_s=2).work(burst=True, logging_level="WARNING")
 
 
+def take_as_a_two_queue_worker(connection) -> Job:
+    """Take the next job as a worker with an engine of its own does (BLPOP from its engine's queue
+    and the base queue), without registering it as started: the job is then in no list."""
+    queues = [
+        Queue(name, connection=connection, serializer=JSONSerializer)
+        for name in engine_queues(QUEUE, ["numba", "liggghts"])
+    ]
+    job, _ = Queue.dequeue_any(queues, None, connection=connection, serializer=JSONSerializer)
+    return job
+
+
 def test_a_generation_is_enqueued_with_trial_ids_as_job_ids(executor, connection):
     specs = [make_spec("s1", i) for i in range(5)]
 
@@ -253,12 +264,8 @@ def test_a_trial_a_worker_is_taking_from_one_of_several_queues_is_in_flight(exec
     # A reconciliation falling there must not take the trial for lost (an attempt it never made).
     spec = make_spec("s1", 0)
     executor.submit([spec])
-    worker_queues = [
-        Queue(name, connection=connection, serializer=JSONSerializer)
-        for name in engine_queues(QUEUE, ["numba", "liggghts"])
-    ]
 
-    job, _ = Queue.dequeue_any(worker_queues, None, connection=connection, serializer=JSONSerializer)
+    job = take_as_a_two_queue_worker(connection)
 
     assert job.id == spec.trial_id and executor.queue.count == 0
     assert executor.in_flight([spec.trial_id]) == {spec.trial_id}
@@ -274,12 +281,8 @@ def test_a_trial_left_between_lists_by_a_dead_worker_is_lost_and_sent_again(
 
     spec, other = make_spec("s1", 0), make_spec("s2", 0)
     executor.submit([spec, other])
-    queues = [
-        Queue(name, connection=connection, serializer=JSONSerializer)
-        for name in engine_queues(QUEUE, ["numba", "liggghts"])
-    ]
     for _ in range(2):
-        Queue.dequeue_any(queues, None, connection=connection, serializer=JSONSerializer)
+        take_as_a_two_queue_worker(connection)
     assert executor.queue.count == 0 and executor.in_flight() == set()  # in no list
 
     monkeypatch.setattr(rq_executor, "BETWEEN_LISTS_S", 0.2)
@@ -357,11 +360,7 @@ def test_a_trial_cancelled_while_between_lists_leaves_no_time_behind(executor, c
     # only cancel can drop that time (a long-lived service would keep one per such trial).
     spec = make_spec("s1", 0)
     executor.submit([spec])
-    queues = [
-        Queue(name, connection=connection, serializer=JSONSerializer)
-        for name in engine_queues(QUEUE, ["numba", "liggghts"])
-    ]
-    Queue.dequeue_any(queues, None, connection=connection, serializer=JSONSerializer)
+    take_as_a_two_queue_worker(connection)
     assert executor.in_flight([spec.trial_id]) == {spec.trial_id}
     assert spec.trial_id in executor._between
 
