@@ -103,13 +103,15 @@ def register(app: typer.Typer) -> None:
         from pydantic import ValidationError
 
         from dem.scenarios import registry
+        from dem.scenarios.paths import READ_FILES
 
         try:
             params, overrides = split_sets(sets)
             config = registry.load_config_file(config_path)
             scenario = registry.get(config.kind)
             if overrides:
-                config = scenario.config(apply_overrides(config.model_dump(mode="json"), overrides))
+                data = apply_overrides(config.model_dump(mode="json"), overrides)
+                config = scenario.config(data, context=READ_FILES)  # the user's own files
         except SetError as exc:
             _fail(str(exc))
         except registry.UnknownScenarioError as exc:

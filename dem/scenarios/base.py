@@ -148,11 +148,12 @@ class Scenario:
     progress_label: str = "bodies"
     extra: dict[str, Any] = field(default_factory=dict)
 
-    def config(self, data: dict[str, Any] | BaseModel) -> BaseModel:
-        """Validate a config given as a mapping (``kind`` may be omitted)."""
+    def config(self, data: dict[str, Any] | BaseModel, context: dict[str, Any] | None = None) -> BaseModel:
+        """Validate a config given as a mapping (``kind`` may be omitted); ``context`` is
+        pydantic's (``dem.scenarios.paths.READ_FILES`` for the user's own files)."""
         if isinstance(data, self.config_model):
             return data
-        return self.config_model.model_validate({**dict(data), "kind": self.kind})
+        return self.config_model.model_validate({**dict(data), "kind": self.kind}, context=context)
 
     def declared(self, config=None) -> tuple[Response, ...]:
         """The responses a run of this config measures (a combined scenario's depend on its parts)."""

@@ -1,8 +1,9 @@
 """The vibration feeder's configuration (``kind = "feeder"``): every key of ``examples/feeder.toml``.
 
-Only pydantic and numpy here, and the tray's geometry config: a study definition names this
-model in its scenario union (``dem/scenarios/registry.py``) without importing the engine. The run
-is ``dem/scenarios/feeder.py``.
+Only pydantic and numpy here, the tray's geometry config and the paths' rules
+(``dem/scenarios/paths.py``): a study definition names this model in its scenario union
+(``dem/scenarios/registry.py``) without importing the engine (the items module is imported only
+to look into a user's folder of meshes). The run is ``dem/scenarios/feeder.py``.
 """
 
 from __future__ import annotations
@@ -12,9 +13,10 @@ import tomllib
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, model_validator
 
 from dem.scenarios.base import ParamsConfig, Section
+from dem.scenarios.paths import READ_FILES, SCENARIO_PATHS
 from dem.scenarios.tray import TrayConfig
 
 # Share of the inlet region's volume (floor area x wall height) that randomly piled flat items
@@ -52,6 +54,20 @@ class ItemsConfig(Section):
     uploaded: bool = Field(
         False, description="counts name shapes uploaded to the service (POST /api/v1/shapes) by id."
     )
+
+    @model_validator(mode="after")
+    def _folder_meshes(self, info: ValidationInfo) -> ItemsConfig:
+        """A folder read from the user's own config (``READ_FILES``) is looked into now, so that a
+        count without its mesh or mass is a config error, not a failed run: counts left out come
+        from the folder's manifest, its masses join the config's."""
+        if self.folder is None or info.context != READ_FILES:
+            return self
+        from dem.scenarios.items import folder_items
+
+        given = self.counts if "counts" in self.model_fields_set else None
+        found = folder_items(self.folder, given, self.masses)
+        self.counts, self.masses = found.counts, found.masses
+        return self
 
     @model_validator(mode="after")
     def _counts_positive(self) -> ItemsConfig:
@@ -149,14 +165,15 @@ class FeederConfig(Section):
 
 
 def load_feeder_config(path: Path | str) -> FeederConfig:
-    """Read and validate a feeder TOML file; relative mesh paths are taken from the file's folder."""
+    """Read and validate a feeder TOML file; relative mesh paths are taken from the file's folder,
+    and the items folder's meshes are looked into (``ItemsConfig``)."""
     path = Path(path)
     with path.open("rb") as handle:
         data = tomllib.load(handle)
-    config = FeederConfig.model_validate(data)
     base = path.resolve().parent
-    if config.tray.mesh_file is not None and not config.tray.mesh_file.is_absolute():
-        config.tray.mesh_file = base / config.tray.mesh_file
-    if config.items.folder is not None and not config.items.folder.is_absolute():
-        config.items.folder = base / config.items.folder
-    return config
+    for section, field in SCENARIO_PATHS:
+        values = data.get(section)
+        given = values.get(field) if isinstance(values, dict) else None
+        if isinstance(given, str) and given and not Path(given).is_absolute():
+            values[field] = str(base / given)
+    return FeederConfig.model_validate(data, context=READ_FILES)

@@ -47,6 +47,7 @@ import logging
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import trimesh
@@ -290,6 +291,59 @@ def _mesh_files(folder: Path) -> dict[str, Path]:
     return files
 
 
+class FolderItems(NamedTuple):
+    """What a folder of meshes feeds: counts and masses (kg) per file stem, the meshes' scale to
+    metres, and the mesh file of every stem."""
+
+    counts: dict[str, int]
+    masses: dict[str, float]
+    scale: float
+    files: dict[str, Path]
+
+
+def folder_items(
+    folder: str | Path,
+    counts: dict[str, int] | None = None,
+    masses: dict[str, float] | None = None,
+    scale: float | None = None,
+) -> FolderItems:
+    """The counts, masses and scale of a folder of meshes: the caller's where given, else its
+    manifest's, ``items.toml`` (``scale = 0.001`` and ``[items.<stem>]`` tables with ``count``
+    and ``mass``) or the same as ``items.json``. Reads file names and the manifest, no mesh; an
+    ``ItemsError`` names the missing mesh, mass or manifest and what to give instead."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ItemsError(f"items folder {folder} does not exist or is not a folder")
+    manifest = _read_manifest(folder)
+    entries = manifest.get("items", {})
+    if not isinstance(entries, dict) or not all(isinstance(e, dict) for e in entries.values()):
+        raise ItemsError(f"{folder}: the manifest's 'items' must be a table of <stem> = {{count, mass}}")
+    try:
+        counts = dict(counts) if counts else {stem: int(e.get("count", 1)) for stem, e in entries.items()}
+        masses = {**{stem: float(e["mass"]) for stem, e in entries.items() if "mass" in e}, **(masses or {})}
+        scale = float(manifest.get("scale", 1.0)) if scale is None else scale
+    except (TypeError, ValueError) as exc:
+        raise ItemsError(f"{folder}: the manifest's counts, masses and scale are numbers ({exc})") from None
+    files = _mesh_files(folder)
+    if not counts:
+        raise ItemsError(f"{folder}: no counts given and no {' or '.join(MANIFEST_NAMES)} manifest found")
+    for stem, count in counts.items():
+        if stem not in files:
+            example = ", ".join(f"{found} = 1" for found in files) or "<stem> = 1"
+            raise ItemsError(
+                f"counts.{stem}: no mesh {stem}.stl/.obj/.ply in {folder} "
+                f"(found: {', '.join(files) or 'none'}); counts name the folder's meshes by file "
+                f"stem (counts = {{ {example} }}), or leave counts out to take them from its "
+                f"{MANIFEST_NAMES[0]}"
+            )
+        if count > 0 and stem not in masses:
+            raise ItemsError(
+                f"masses.{stem}: the mass (kg) of {files[stem].name} is missing; give masses.{stem} "
+                f"or a mass in the folder's {MANIFEST_NAMES[0]}"
+            )
+    return FolderItems(counts, masses, scale, files)
+
+
 def items_from_folder(
     folder: str | Path,
     counts: dict[str, int] | None = None,
@@ -305,36 +359,16 @@ def items_from_folder(
 ) -> list[Item]:
     """Items from a folder of STL/OBJ/PLY meshes; kinds are file stems.
 
-    ``counts`` and ``masses`` (kg) per stem; missing ones come from a manifest in the folder,
-    ``items.toml`` (``scale = 0.001`` and ``[items.<stem>]`` tables with ``count`` and ``mass``)
-    or the same as ``items.json``. ``scale`` converts the files to metres (manifest, else 1).
-    Meshes over ``FOLDER_MESH_FACES`` faces are decimated first; a non-convex mesh becomes
-    convex pieces by ``dem.polyhedra.convex_pieces`` (CoACD) in the polyhedron representation.
+    ``counts``, ``masses`` (kg) and ``scale`` (the files' unit in metres) as ``folder_items``
+    takes them. Meshes over ``FOLDER_MESH_FACES`` faces are decimated first; a non-convex mesh
+    becomes convex pieces by ``dem.polyhedra.convex_pieces`` (CoACD) in the polyhedron
+    representation.
     """
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise ItemsError(f"items folder {folder} does not exist or is not a folder")
-    manifest = _read_manifest(folder)
-    entries = manifest.get("items", {})
-    if not isinstance(entries, dict):
-        raise ItemsError(f"{folder}: the manifest's 'items' must be a table of <stem> = {{count, mass}}")
-    counts = dict(counts) if counts else {stem: int(entry.get("count", 1)) for stem, entry in entries.items()}
-    masses = {**{stem: entry["mass"] for stem, entry in entries.items() if "mass" in entry}, **(masses or {})}
-    scale = float(manifest.get("scale", 1.0)) if scale is None else scale
-    files = _mesh_files(folder)
-    if not counts:
-        raise ItemsError(f"{folder}: no counts given and no {' or '.join(MANIFEST_NAMES)} manifest found")
+    counts, masses, scale, files = folder_items(folder, counts, masses, scale)
     rng = rng if rng is not None else np.random.default_rng(0)
 
     items: list[Item] = []
     for stem, count in counts.items():
-        if stem not in files:
-            raise ItemsError(
-                f"counts.{stem}: no mesh {stem}.stl/.obj/.ply in {folder} "
-                f"(found: {', '.join(files) or 'none'})"
-            )
-        if stem not in masses:
-            raise ItemsError(f"masses.{stem}: the mass (kg) of {files[stem].name} is missing")
         if count <= 0:
             continue
         try:

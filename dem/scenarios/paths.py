@@ -23,6 +23,10 @@ MESH_SUBDIR = "meshes"
 SHAPES_SUBDIR = "shapes"
 # (section, field) of every path a scenario config may hold.
 SCENARIO_PATHS = (("tray", "mesh_file"), ("items", "folder"))
+# The validation context of a config read from the user's own files (``demcal simulate`` and
+# ``calibrate``): its validators may then look into the folders it names. A scenario sent to the
+# API is validated without it, so nothing is opened before its paths are confined.
+READ_FILES = {"read_files": True}
 
 
 class ScenarioPathError(ValueError):

@@ -47,3 +47,21 @@ def test_bad_set_exits_2_naming_it(tmp_path):
         assert result.stdout == ""
     result = CliRunner().invoke(app, ["simulate", str(config), "--set", "vibration.amplitude=-1"])
     assert result.exit_code == 2 and "vibration.amplitude" in result.stderr
+
+
+def test_a_folder_without_the_counted_meshes_exits_2_saying_how_to_name_them(tmp_path):
+    import trimesh
+
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    trimesh.creation.box((0.08, 0.04, 0.012)).export(scans / "remote.stl")
+    config = tmp_path / "tiny.toml"
+    config.write_text(TINY)  # counts the built-in smartphone and camera
+    result = CliRunner().invoke(app, ["simulate", str(config), "--set", f"items.folder={scans}"])
+    assert result.exit_code == 2, result.output
+    assert "counts.smartphone: no mesh smartphone" in result.stderr
+    assert "counts = { remote = 1 }" in result.stderr  # the fix, in the folder's own stems
+    result = CliRunner().invoke(
+        app, ["simulate", str(config), "--set", f"items.folder={scans}", "--set", "items.counts={remote = 1}"]
+    )
+    assert result.exit_code == 2 and "masses.remote" in result.stderr

@@ -242,3 +242,34 @@ def test_a_folder_mesh_becomes_convex_pieces_in_the_polyhedron_representation(tm
     assert len(loaded) == 2
     assert loaded[0].shape.n_pieces >= 2
     assert loaded[0].shape.mass == pytest.approx(0.1)
+
+
+def test_a_manifest_with_a_count_that_is_no_number_is_an_items_error(tmp_path):
+    _write_folder(tmp_path)
+    (tmp_path / "items.json").write_text(json.dumps({"items": {"remote": {"count": "two", "mass": 0.09}}}))
+
+    with pytest.raises(ItemsError, match="scale are numbers"):
+        items_from_folder(tmp_path, cache_dir=False)
+
+
+def test_a_feeder_file_naming_a_folder_takes_its_counts_and_masses_from_the_manifest(tmp_path):
+    from pydantic import ValidationError
+
+    from dem.scenarios.feeder_config import FeederConfig, load_feeder_config
+
+    (tmp_path / "scans").mkdir()
+    _write_folder(tmp_path / "scans")
+    (tmp_path / "feeder.toml").write_text('[items]\nfolder = "scans"\n')
+
+    config = load_feeder_config(tmp_path / "feeder.toml")
+
+    assert config.items.folder == tmp_path / "scans"  # relative to the file, not the working dir
+    assert config.items.counts == {"remote": 2, "scan": 1}
+    assert config.items.masses == {"remote": 0.09, "scan": 0.05}
+    (tmp_path / "feeder.toml").write_text('[items]\nfolder = "scans"\ncounts = { radio = 1 }\n')
+    with pytest.raises(ValidationError, match=r"counts.radio: no mesh radio.*found: remote, scan"):
+        load_feeder_config(tmp_path / "feeder.toml")
+    # Validated as the API validates a client's scenario (no READ_FILES context), nothing is
+    # opened: its paths are confined to the mesh directory before any file is read.
+    sent = FeederConfig.model_validate({"items": {"folder": "/nonexistent", "counts": {"radio": 1}}})
+    assert sent.items.counts == {"radio": 1}
