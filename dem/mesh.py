@@ -29,6 +29,11 @@ from dem.frames import principal_axes
 logger = logging.getLogger(__name__)
 
 ALLOWED_FILE_TYPES = ("stl", "obj", "ply")
+# ``decimate`` keeps a result only if its volume is within this fraction of the mesh's, trying
+# the quadric simplifier's aggressions in turn: at its default (7) fast-simplification folded a
+# scanned phone and a camera into watertight meshes 12 % and 25 % smaller; 3 kept 99.5 % of both.
+DECIMATION_VOLUME_TOLERANCE = 0.01
+DECIMATION_AGGRESSIONS = (7, 5, 3, 1, 0)  # 0 keeps most faces where the others fold the surface
 
 # Leading bytes of containers we refuse: an "STL" that is really a zip must not reach a parser
 # that would happily unpack it.
@@ -278,16 +283,30 @@ def decimate(
         raise MeshError(f"decimation target of {target} faces is too coarse; keep at least 8")
     if target >= n_faces:
         return mesh.copy()
-    simplified = mesh.simplify_quadric_decimation(face_count=target)
-    simplified.merge_vertices()
-    _remove_fins(simplified)
-    if not simplified.is_watertight:
-        trimesh.repair.fill_holes(simplified)
-    if not simplified.is_watertight:
+    volume = float(mesh.volume)
+    change = None
+    for aggression in DECIMATION_AGGRESSIONS:
+        simplified = mesh.simplify_quadric_decimation(face_count=target, aggression=aggression)
+        simplified.merge_vertices()
+        _remove_fins(simplified)
+        if not simplified.is_watertight:
+            trimesh.repair.fill_holes(simplified)
+        if not simplified.is_watertight:
+            continue
+        trimesh.repair.fix_normals(simplified)
+        change = abs(float(simplified.volume) / volume - 1.0)
+        if change <= DECIMATION_VOLUME_TOLERANCE:
+            logger.info(
+                "decimated mesh from %d to %d faces (aggression %d, volume within %.2g %%)",
+                n_faces, len(simplified.faces), aggression, 100 * change,
+            )  # fmt: skip
+            return simplified
+    if change is None:
         raise MeshNotWatertightError(f"decimating to {target} faces opened the mesh; choose a larger target")
-    trimesh.repair.fix_normals(simplified)
-    logger.info("decimated mesh from %d to %d faces", n_faces, len(simplified.faces))
-    return simplified
+    raise MeshGeometryError(
+        f"decimating to {target} faces changed the volume by {100 * change:.2g} % or more at every "
+        f"aggression; choose a larger target"
+    )
 
 
 def _remove_fins(mesh: trimesh.Trimesh) -> None:

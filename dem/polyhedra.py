@@ -35,6 +35,11 @@ MAX_CORE_VERTICES = 48  # a core with more vertices is simplified (support queri
 # distance; simplify_core). 0 keeps every vertex (farthest-point sampling down to
 # MAX_CORE_VERTICES beyond), as cores were made before.
 CORE_TOLERANCE = 0.1
+# A mesh whose convex hull lies within this fraction of its size (the bounding box's diagonal) of
+# its surface is one convex piece (``convex_pieces``): a scan's noise or a decimation leaves a
+# convex item's mesh slightly non-convex (a phone scanned with 0.05 mm of noise: CoACD cut it
+# into 3 pieces), and each piece costs a contact pair and a seam without adding shape.
+CONVEX_TOLERANCE = 0.01
 # The crown of a core's faces (dem/crown.py) as its height at the edge of a face as wide as the
 # piece, per unit of that width: R = size / (8 CROWN).
 CROWN = 5e-4
@@ -199,15 +204,26 @@ def thinnest_dimension(points: np.ndarray) -> float:
     return float(np.min(obb.primitive.extents))
 
 
+def convex_departure(mesh: trimesh.Trimesh, n_samples: int = 2000, seed: int = 1) -> float:
+    """Largest distance from the surface of the mesh's convex hull to the mesh (m), sampled at
+    ``n_samples`` points spread evenly over the hull: 0 for a convex mesh, else the depth of its
+    deepest concavity (a camera's corner beside its lens barrel)."""
+    points, _ = trimesh.sample.sample_surface_even(mesh.convex_hull, n_samples, seed=seed)
+    _, distance, _ = trimesh.proximity.closest_point(mesh, points)
+    return float(np.max(distance))
+
+
 def convex_pieces(
     mesh: trimesh.Trimesh, max_pieces: int = 8, threshold: float = 0.05
 ) -> list[trimesh.Trimesh]:
-    """The mesh itself if it is convex, else its approximate convex decomposition by CoACD (Wei,
-    Liu, Wang & Luo, "Approximate convex decomposition for 3D meshes with collision-aware
-    concavity and tree search", SIGGRAPH 2022): at most ``max_pieces`` pieces, each within
-    ``threshold`` (relative to the mesh size) of convex. Seconds per mesh: decompose once per
-    kind and map the pieces to variants (``deform_polyhedron``)."""
-    if mesh.is_convex:
+    """The mesh itself if it is convex, or its hull within ``CONVEX_TOLERANCE`` of its size of
+    it (``convex_departure``), else its approximate convex decomposition by CoACD (Wei, Liu,
+    Wang & Luo, "Approximate convex decomposition for 3D meshes with collision-aware concavity
+    and tree search", SIGGRAPH 2022): at most ``max_pieces`` pieces, each within ``threshold``
+    (relative to the mesh size) of convex. Seconds per mesh: decompose once per kind and map the
+    pieces to variants (``deform_polyhedron``)."""
+    size = float(np.linalg.norm(mesh.extents))
+    if mesh.is_convex or convex_departure(mesh) <= CONVEX_TOLERANCE * size:
         return [mesh]
     try:
         import coacd

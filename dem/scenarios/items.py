@@ -36,8 +36,9 @@ every run, as in the experiment.
 
 User meshes (``items_from_folder``): STL/OBJ/PLY files in a folder with counts and masses (from
 the caller, or a ``items.toml`` / ``items.json`` manifest in the folder), validated, decimated when
-heavy (scans), then decomposed into convex pieces (CoACD) or clumped. This module must not run
-simulations.
+heavy (scans; ``dem.mesh.decimate`` keeps the volume), then decomposed into convex pieces (CoACD;
+a scan of a convex item stays one piece, ``dem.polyhedra.CONVEX_TOLERANCE``) or clumped. This
+module must not run simulations.
 """
 
 from __future__ import annotations

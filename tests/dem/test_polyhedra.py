@@ -12,9 +12,11 @@ from scipy.optimize import minimize
 
 from dem.convex import _REL_EPS, _hull2, _outline, contact_patch, gjk_distance, place, scratch
 from dem.polyhedra import (
+    CONVEX_TOLERANCE,
     ROUNDING_FRACTION,
     Polyhedron,
     PolyhedronError,
+    convex_departure,
     convex_pieces,
     face_loop_order,
     make_polyhedron,
@@ -261,6 +263,21 @@ def test_a_non_convex_mesh_is_decomposed_into_convex_pieces_of_its_volume():
     assert len(pieces) >= 2
     assert all(p.is_convex for p in pieces)
     assert sum(p.volume for p in pieces) == pytest.approx(mesh.volume, rel=0.02)
+
+
+def test_a_scanned_convex_item_stays_one_piece_and_a_camera_does_not():
+    # Scan noise (0.05 mm on a 146 mm phone) makes the mesh non-convex by a quarter of a millimetre,
+    # far inside CONVEX_TOLERANCE; the camera's corner beside its lens barrel is 8 mm deep.
+    phone = CATALOGUE["smartphone"].mesh().subdivide().subdivide()
+    phone.vertices += np.random.default_rng(0).normal(scale=0.05e-3, size=phone.vertices.shape)
+    size = float(np.linalg.norm(phone.extents))
+    assert not phone.is_convex
+    assert 0 < convex_departure(phone) < 0.25 * CONVEX_TOLERANCE * size
+
+    assert convex_pieces(phone) == [phone]
+    camera = CATALOGUE["camera"].mesh()
+    assert convex_departure(camera) > 5 * CONVEX_TOLERANCE * float(np.linalg.norm(camera.extents))
+    assert len(convex_pieces(camera)) >= 2
 
 
 def test_rounded_box_core_and_reach():
