@@ -19,6 +19,7 @@ from typing import Annotated, Any, Union
 from pydantic import BaseModel, BeforeValidator, Field, ValidationInfo
 
 from dem.scenarios.base import Scenario, error_line
+from dem.scenarios.paths import READ_FILES
 
 # kind -> ("module:ConfigModel", module defining SCENARIO)
 BUILT_IN: dict[str, tuple[str, str]] = {
@@ -123,4 +124,4 @@ def load_config_file(path: Path | str) -> BaseModel:
     scenario = for_config(data)
     if scenario.load_function is not None:
         return scenario.load_function(path)
-    return scenario.config({k: v for k, v in data.items() if k != "kind"})
+    return scenario.config({k: v for k, v in data.items() if k != "kind"}, context=READ_FILES)
