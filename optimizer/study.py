@@ -645,7 +645,9 @@ def parse_study(data: dict[str, Any], base_dir: Path | None = None) -> StudyDefi
         template = Path(options["template"])
         if not template.is_absolute():
             data["engine_options"] = {**options, "template": str((base_dir or Path.cwd()) / template)}
-    return StudyDefinition.model_validate(data)
+    from dem.scenarios.paths import READ_FILES
+
+    return StudyDefinition.model_validate(data, context=READ_FILES)  # the user's own files
 
 
 def load_study_file(path: str | Path) -> StudyDefinition:
