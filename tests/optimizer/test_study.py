@@ -80,6 +80,20 @@ def test_scenario_path_is_read_relative_to_the_study_file_and_inlined(tmp_path):
     assert "scenario_path" not in definition.model_dump()
 
 
+def test_a_study_files_items_folder_is_looked_into_before_the_study_starts(tmp_path):
+    import trimesh
+
+    (tmp_path / "scans").mkdir()
+    trimesh.creation.box((0.08, 0.04, 0.012)).export(tmp_path / "scans" / "remote.stl")
+    inline = {"items": {"folder": str(tmp_path / "scans"), "counts": {"radio": 1}}}
+    path = tmp_path / "study.json"
+    path.write_text(json.dumps({"scenario": inline, "experiment": {"measured": [1]}}))
+    with pytest.raises(StudyDefinitionError, match="counts.radio: no mesh radio.*found: remote"):
+        load_study_file(path)
+    # The same definition validated as the API validates a request opens nothing.
+    assert make_definition(scenario=inline).scenario.items.counts == {"radio": 1}
+
+
 def test_bad_scenario_key_is_named_as_written():
     with pytest.raises(ValidationError) as refused:
         make_definition(scenario={"vibration": {"amplitude": -1.0}})
