@@ -217,6 +217,10 @@ def test_new_results_alone_redraw_the_page_without_reading_its_views_again(page,
     page.goto(dashboard.url(f"/studies/{study_id}"))
     page.wait_for_function(PLOTTED, arg="pareto-plot")
     page.wait_for_function("() => document.getElementById('progress-caption').textContent !== ''")
+    # The caption can be drawn before the last of the three views has been asked for (alone, on a
+    # cold browser, none had been): wait for the load's three, then count.
+    wait_until(page, lambda: len(read) >= 3)
+    page.wait_for_timeout(500)
     first_load = len(read)
 
     result = SimulationResult(status=SimulationStatus.OK, n_items=30, n_remaining=4, wall_time_s=50, cost=5e7)
