@@ -13,28 +13,27 @@ local files as before.
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
 from api.errors import InvalidInputError
-from dem.scenarios.paths import MESH_SUBDIR, SCENARIO_PATHS, inside, mesh_root
+from dem.scenarios.paths import MESH_SUBDIR, inside, mesh_root, path_tables
 
 
 def confine_paths(scenario: dict[str, Any], data_dir: Path) -> dict[str, Any]:
-    """The scenario with its paths made relative to the mesh directory; 422 for any other path."""
+    """The scenario with its paths, at any depth (``path_tables``), made relative to the mesh
+    directory; 422 for any other path."""
     root = mesh_root(data_dir)
-    confined = dict(scenario)
-    for section, field in SCENARIO_PATHS:
-        values = scenario.get(section)
-        if not isinstance(values, dict) or values.get(field) in (None, ""):
-            continue
-        given = str(values[field])
+    confined = copy.deepcopy(scenario)
+    for where, table, field in list(path_tables(confined)):
+        given = str(table[field])
         resolved = inside(root, given)
         if resolved is None:
             raise InvalidInputError(
-                f"scenario.{section}.{field}: a scenario sent to the API may name only files inside "
-                f"the server's mesh directory ($DEMCAL_DATA_DIR/{MESH_SUBDIR}), as a path relative "
-                f"to it; {given!r} is outside"
+                f"scenario.{where}: a scenario sent to the API may name only files inside the "
+                f"server's mesh directory ($DEMCAL_DATA_DIR/{MESH_SUBDIR}), as a path relative to "
+                f"it; {given!r} is outside"
             )
-        confined[section] = {**values, field: str(resolved.relative_to(root))}
+        table[field] = str(resolved.relative_to(root))
     return confined

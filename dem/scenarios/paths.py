@@ -16,6 +16,8 @@ Must not: open the files; the scenario does that, and says what is wrong with th
 
 from __future__ import annotations
 
+import copy
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +51,21 @@ def inside(root: Path, given: str) -> Path | None:
     return resolved if "\x00" not in given and resolved.is_relative_to(root) else None
 
 
+def path_tables(scenario: dict[str, Any], location: tuple[str, ...] = ()) -> Iterator[tuple[str, dict, str]]:
+    """(dotted location, the table holding it, its key) of every path a scenario config names,
+    at any depth: ``tray.mesh_file`` and ``items.folder`` at the top, an angle of repose's
+    ``particles.items.folder``, a combined scenario's ``parts.<name>.items.folder``: confining
+    only the top-level ones let a nested folder name any path of the worker's."""
+    fields = dict(SCENARIO_PATHS)
+    for key, value in scenario.items():
+        if not isinstance(value, dict):
+            continue
+        field = fields.get(key)
+        if field is not None and value.get(field) not in (None, ""):
+            yield ".".join((*location, key, field)), value, field
+        yield from path_tables(value, (*location, key))
+
+
 def resolve_paths(scenario: dict[str, Any], data_dir: Path | None) -> dict[str, Any]:
     """The scenario with its relative paths resolved inside ``data_dir``'s mesh directory and its
     uploaded shapes as the folder that holds them (a copy; absolute paths kept). With no
@@ -56,16 +73,15 @@ def resolve_paths(scenario: dict[str, Any], data_dir: Path | None) -> dict[str, 
     if data_dir is None:
         return scenario
     root = mesh_root(data_dir)
-    resolved = dict(scenario)
-    for section, field in SCENARIO_PATHS:
-        values = scenario.get(section)
-        given = values.get(field) if isinstance(values, dict) else None
-        if given in (None, "") or Path(given).is_absolute():
+    resolved = copy.deepcopy(scenario)
+    for where, table, field in list(path_tables(resolved)):
+        given = str(table[field])
+        if Path(given).is_absolute():
             continue
-        path = inside(root, str(given))
+        path = inside(root, given)
         if path is None:
-            raise ScenarioPathError(f"{section}.{field} {given!r} leaves the mesh directory {root}")
-        resolved[section] = {**values, field: str(path)}
+            raise ScenarioPathError(f"{where} {given!r} leaves the mesh directory {root}")
+        table[field] = str(path)
     items = resolved.get("items")
     if isinstance(items, dict) and items.get("uploaded"):
         folder = shape_file(data_dir, "-").parent

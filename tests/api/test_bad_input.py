@@ -105,6 +105,43 @@ def test_a_scenario_naming_a_server_path_is_422_before_anything_is_opened(client
         assert "mesh directory" in response.json()["detail"]
 
 
+@pytest.mark.parametrize(
+    "scenario, where",
+    [
+        (
+            {"kind": "angle_of_repose", "particles": {"items": {"folder": "/etc", "counts": {"passwd": 1}}}},
+            "scenario.particles.items.folder",
+        ),
+        (
+            {"kind": "combined", "parts": {"a": {"kind": "feeder", "tray": {"mesh_file": "/etc/shadow"}}}},
+            "scenario.parts.a.tray.mesh_file",
+        ),
+    ],
+)
+def test_a_path_nested_in_a_scenario_is_confined_as_a_top_level_one(client, keys, scenario, where):
+    # Before, only the top-level tray and items were confined: these were accepted (202).
+    response = client.post(
+        "/api/v1/simulations", json={"scenario": scenario, "params": SIMULATION_PARAMS}, headers=keys.auth()
+    )
+
+    assert response.status_code == 422, response.text
+    assert response.json()["detail"].startswith(where) and "mesh directory" in response.json()["detail"]
+
+
+def test_a_worker_resolves_nested_relative_paths_inside_its_own_mesh_directory(tmp_path):
+    from dem.scenarios.paths import ScenarioPathError, mesh_root, resolve_paths
+
+    scenario = {"kind": "combined", "parts": {"a": {"kind": "angle_of_repose", "particles": {"items": {
+        "folder": "scans"}}}}}  # fmt: skip
+    resolved = resolve_paths(scenario, tmp_path)
+
+    assert resolved["parts"]["a"]["particles"]["items"]["folder"] == str(mesh_root(tmp_path) / "scans")
+    assert scenario["parts"]["a"]["particles"]["items"]["folder"] == "scans"  # a copy
+    scenario["parts"]["a"]["particles"]["items"]["folder"] = "../../etc"
+    with pytest.raises(ScenarioPathError, match="parts.a.particles.items.folder"):
+        resolve_paths(scenario, tmp_path)
+
+
 def test_a_mesh_inside_the_mesh_directory_is_stored_relative_to_it(client, keys, settings):
     # Each worker resolves it against its own mesh directory: no path of the server's travels.
     inside = str((settings.data_dir / "meshes" / "trays" / "t1.stl").resolve())
