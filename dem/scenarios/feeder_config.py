@@ -16,7 +16,7 @@ from typing import Literal
 from pydantic import Field, ValidationInfo, model_validator
 
 from dem.scenarios.base import ParamsConfig, Section
-from dem.scenarios.paths import READ_FILES, SCENARIO_PATHS
+from dem.scenarios.paths import READ_FILES, path_tables
 from dem.scenarios.tray import TrayConfig
 
 # Share of the inlet region's volume (floor area x wall height) that randomly piled flat items
@@ -171,9 +171,8 @@ def load_feeder_config(path: Path | str) -> FeederConfig:
     with path.open("rb") as handle:
         data = tomllib.load(handle)
     base = path.resolve().parent
-    for section, field in SCENARIO_PATHS:
-        values = data.get(section)
-        given = values.get(field) if isinstance(values, dict) else None
-        if isinstance(given, str) and given and not Path(given).is_absolute():
-            values[field] = str(base / given)
+    for _, table, field in list(path_tables(data)):
+        given = table[field]
+        if isinstance(given, str) and not Path(given).is_absolute():
+            table[field] = str(base / given)
     return FeederConfig.model_validate(data, context=READ_FILES)

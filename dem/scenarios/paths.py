@@ -23,7 +23,7 @@ from typing import Any
 
 MESH_SUBDIR = "meshes"
 SHAPES_SUBDIR = "shapes"
-# (section, field) of every path a scenario config may hold.
+# (section, field) of every path a scenario config may hold, at any depth (``path_tables``).
 SCENARIO_PATHS = (("tray", "mesh_file"), ("items", "folder"))
 # The validation context of a config read from the user's own files (``demcal simulate`` and
 # ``calibrate``): its validators may then look into the folders it names. A scenario sent to the
